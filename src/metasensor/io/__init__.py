@@ -1,0 +1,1 @@
+"""File input/output: atomic writes, view stacks (TIFF/Zarr), raw frame streams."""

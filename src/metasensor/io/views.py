@@ -1,0 +1,127 @@
+"""View stacks on disk: multi-page TIFF (page ``u * nnum + v`` = view (u, v)) or Zarr.
+
+The TIFF layout is the authors' "meta image" layout (interface.md); the system configuration is
+stored as JSON in the TIFF's ImageDescription (key ``"metasensor"``) and as a Zarr attribute.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+
+from metasensor.config import SystemConfig
+from metasensor.io.atomic import atomic_path
+
+__all__ = ["write_views", "read_views", "read_config_from_views"]
+
+
+def _check_views(views: np.ndarray) -> np.ndarray:
+    views = np.asarray(views)
+    if views.ndim != 4 or views.shape[0] != views.shape[1]:
+        raise ValueError(f"views must have shape (nnum, nnum, H, W), got {views.shape}")
+    return views
+
+
+def write_views(path: str | Path, views: np.ndarray, cfg: SystemConfig | None = None,
+                extra: dict | None = None) -> Path:
+    """Write a view stack ``(nnum, nnum, H, W)`` to ``.tif``/``.tiff`` or ``.zarr`` atomically."""
+    import tifffile
+
+    views = _check_views(views)
+    path = Path(path)
+    meta = {"metasensor": {"kind": "views", "shape": list(views.shape)}}
+    if cfg is not None:
+        meta["metasensor"]["config"] = cfg.to_dict()
+    if extra:
+        meta["metasensor"].update(extra)
+    n = views.shape[0]
+    if path.suffix.lower() == ".zarr":
+        return _write_zarr(path, views, meta)
+    if path.suffix.lower() not in (".tif", ".tiff"):
+        raise ValueError(f"view stack path must end in .tif, .tiff or .zarr: {path}")
+    pages = views.reshape(n * n, *views.shape[2:])
+    with atomic_path(path) as tmp:
+        tifffile.imwrite(tmp, pages, description=json.dumps(meta), metadata=None,
+                         bigtiff=pages.nbytes > 2**31)
+    return path
+
+
+def _write_zarr(path: Path, views: np.ndarray, meta: dict) -> Path:
+    import shutil
+
+    import zarr
+
+    tmp = path.with_name(f".{path.name}.tmp")
+    if tmp.exists():
+        shutil.rmtree(tmp)
+    n = views.shape[0]
+    arr = zarr.open_array(str(tmp), mode="w", shape=views.shape, dtype=views.dtype,
+                          chunks=(1, 1, min(1024, views.shape[2]), min(1024, views.shape[3])))
+    for u in range(n):
+        arr[u] = views[u]
+    arr.attrs.update(meta)
+    if path.exists():
+        shutil.rmtree(path)
+    tmp.rename(path)
+    return path
+
+
+def read_views(path: str | Path, nnum: int | None = None, mmap: bool = False) -> np.ndarray:
+    """Read a view stack written by :func:`write_views` (or any ``nnum²``-page TIFF).
+
+    ``nnum`` is taken from the metadata, else from the page count (which must be a square).
+    ``.zarr`` stores are returned lazily as a zarr array (index it to load blocks).
+    """
+    import tifffile
+
+    path = Path(path)
+    if not path.exists():
+        raise FileNotFoundError(f"view stack not found: {path}")
+    if path.suffix.lower() == ".zarr":
+        import zarr
+
+        arr = zarr.open_array(str(path), mode="r")
+        if arr.ndim != 4:
+            raise ValueError(f"{path}: expected a 4-D (nnum, nnum, H, W) array, got {arr.shape}")
+        return arr
+    try:
+        with tifffile.TiffFile(path) as tif:
+            pages = tif.asarray(out="memmap") if mmap else tif.asarray()
+    except Exception as exc:  # tifffile raises many types for corrupt files
+        raise ValueError(f"{path}: not a readable TIFF view stack ({exc})") from None
+    if pages.ndim == 2:
+        pages = pages[None]
+    if pages.ndim != 3:
+        raise ValueError(f"{path}: expected a stack of 2-D pages, got shape {pages.shape}")
+    if nnum is None:
+        cfg = read_config_from_views(path)
+        nnum = cfg.nnum if cfg is not None else math.isqrt(pages.shape[0])
+    if nnum * nnum != pages.shape[0]:
+        raise ValueError(f"{path}: {pages.shape[0]} pages is not nnum² for nnum = {nnum}")
+    return pages.reshape(nnum, nnum, *pages.shape[1:])
+
+
+def read_config_from_views(path: str | Path) -> SystemConfig | None:
+    """The SystemConfig stored in a view stack's metadata, or ``None``."""
+    import tifffile
+
+    path = Path(path)
+    if path.suffix.lower() == ".zarr":
+        import zarr
+
+        meta = dict(zarr.open_array(str(path), mode="r").attrs).get("metasensor", {})
+    else:
+        try:
+            with tifffile.TiffFile(path) as tif:
+                desc = tif.pages[0].description
+        except Exception as exc:
+            raise ValueError(f"{path}: not a readable TIFF ({exc})") from None
+        try:
+            meta = json.loads(desc).get("metasensor", {})
+        except (json.JSONDecodeError, AttributeError):
+            return None
+    cfg = meta.get("config")
+    return SystemConfig.from_dict(cfg) if cfg else None

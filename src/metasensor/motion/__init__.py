@@ -1,0 +1,1 @@
+"""Motion and turbulence correction of realigned views."""

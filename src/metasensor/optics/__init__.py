@@ -1,0 +1,1 @@
+"""Wave optics: Zernike polynomials, pupils, the coded-MLA phase-space PSFs, turbulence."""

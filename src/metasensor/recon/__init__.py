@@ -1,0 +1,1 @@
+"""Reconstruction: phase-space deconvolution (ISA), fast deconvolution, DAO, blocks."""

@@ -1,0 +1,1 @@
+"""Sensor geometry: scan orders, realign/unrealign, lenslet-grid calibration, rectification."""

@@ -1,0 +1,1 @@
+"""Simulator: raw meta-imaging captures with known truth, built-in scenes, comparison sensors."""
