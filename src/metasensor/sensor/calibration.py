@@ -58,6 +58,7 @@ class Calibration:
         nominal ones were assumed).
     contrast : strength of the lenslet pattern used (lattice-peak over mean, 0..1).
     flat : flat-field map file (TIFF, relative to the TOML file's folder) or ``None``.
+    flat_origin : (row, col) lenslet index in the flat-field map of kept lenslet (0, 0).
     """
 
     nnum: int
@@ -72,9 +73,11 @@ class Calibration:
     offsets: tuple[tuple[float, float], ...] | None = None
     contrast: float = 0.0
     flat: str | None = None
+    flat_origin: tuple[int, int] = (0, 0)
 
     def __post_init__(self) -> None:
         fix = object.__setattr__
+        fix(self, "flat_origin", tuple(int(v) for v in self.flat_origin))
         fix(self, "center", tuple(float(v) for v in self.center))
         fix(self, "lenslets", tuple(int(v) for v in self.lenslets))
         fix(self, "sensor_shape", tuple(int(v) for v in self.sensor_shape))
