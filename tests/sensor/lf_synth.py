@@ -70,3 +70,26 @@ def render_truth(rect_shape, nnum, nominal_rect=(0, 0), delta=(0.0, 0.0), scene=
     local = qk - nnum * np.round(qk / nnum)
     s = (scene or scene_fn())(yy + delta[0], xx + delta[1])
     return s * pupil(local[0], local[1])
+
+
+def true_views(calib, cfg, pitch, rotation_deg, center, phases, jitter, scene=None):
+    """Views rendered directly on the exact grid that ``calib`` rectifies to: its lenslet
+    (0, 0) is the true lattice point nearest ``calib.center``; phase k's scene is seen through
+    the jittered lenslets (``jitter[k]`` sensor px)."""
+    from metasensor.sensor.realign import realign
+
+    nnum = calib.nnum
+    m = matrix(pitch, rotation_deg, nnum)
+    a = m * nnum
+    k = np.round(np.linalg.solve(a, np.asarray(calib.center) - np.asarray(center)))
+    q_origin = np.linalg.solve(m, a @ k)  # rectified coordinate of that lenslet's cell corner
+    scene = scene or scene_fn()
+    d = nnum // cfg.scan
+
+    def shifted(y, x):
+        return scene(y + q_origin[0], x + q_origin[1])
+
+    truth = np.stack([render_truth(calib.rect_shape(), nnum, (r * d, c * d),
+                                   np.linalg.solve(m, np.asarray(j, float)), shifted)
+                      for (r, c), j in zip(phases, jitter, strict=True)])
+    return realign(truth, cfg, phases)

@@ -178,5 +178,6 @@ def write_raw(path: str | Path, frames: np.ndarray, description: str | None = No
         raise ValueError(f"raw frames must be (T, H, W), got shape {frames.shape}")
     with atomic_path(path) as tmp:
         tifffile.imwrite(tmp, frames, description=description, metadata=None,
+                         photometric="minisblack",
                          bigtiff=frames.nbytes > 2**31 - 2**25)
     return Path(path)

@@ -100,7 +100,7 @@ def realign_cmd(
     sliding: bool = typer.Option(False, "--sliding", help="one view stack per frame (a sliding "
                                  "window of one scan period) instead of one per period"),
     start_phase: int = typer.Option(0, "--start-phase", help="index in the order of frame 0"),
-    method: str = typer.Option("spline", "--method", help="interpolator: spline|cubic|lanczos"),
+    method: str = typer.Option("lanczos", "--method", help="interpolator: lanczos|spline|cubic"),
     apply_flat: bool = typer.Option(False, "--flat", help="divide by the calibration's flat "
                                     "field"),
 ) -> None:

@@ -164,6 +164,7 @@ def realign_sequence(frames: Iterable[np.ndarray], cfg: SystemConfig, scan_order
     tp = p * p
     if not isinstance(start_phase, (int, np.integer)) or not 0 <= start_phase < tp:
         raise ValueError(f"start_phase must be an integer in 0..{tp - 1}, got {start_phase!r}")
+    offsets = phase_offsets(order, cfg, moving)
     ring: np.ndarray | None = None
     count = 0
     for f, frame in enumerate(frames):
@@ -181,7 +182,9 @@ def realign_sequence(frames: Iterable[np.ndarray], cfg: SystemConfig, scan_order
         ring[(f + start_phase) % tp] = frame
         count = f + 1
         if count >= tp and (sliding or count % tp == 0):
-            yield realign(ring, cfg, order, moving, engine=engine)
+            ly, lx = lenslet_counts(ring.shape[1:], cfg, moving)
+            out = np.empty((cfg.nnum, cfg.nnum, ly * p, lx * p), dtype=ring.dtype)
+            yield gather_views(ring, out, order, offsets, cfg.nnum, p, ly, lx, engine=engine)
     if count < tp:
         raise ValueError(f"got {count} frames but one {p}x{p} scan period needs {tp}")
     if not sliding and count % tp:
