@@ -64,7 +64,8 @@ def collapse(fine: np.ndarray, factor: int = SUBSAMPLE, integrate: bool = False)
     # A[k, f] = u(factor*k - (f - c)): (H ⊛ u)(factor*k) = Σ_f A[k, f] H(f), per axis
     g = factor * np.arange(-half, half + 1)[:, None] - (np.arange(kf)[None, :] - c)
     amat = np.where(np.abs(g) <= pad, u1[np.clip(g + pad, 0, len(u1) - 1)], 0.0)
-    out = np.matmul(np.matmul(amat, fine.reshape(-1, kf, kf)), amat.T)
+    at = torch.from_numpy(amat)
+    out = (at @ torch.from_numpy(fine.reshape(-1, kf, kf)) @ at.T).numpy()
     return out.reshape(*lead, 2 * half + 1, 2 * half + 1).astype(np.float32)
 
 

@@ -9,7 +9,7 @@ ADC (the photon budget per pixel at full scale). A noisy value is
 
 A target SNR instead of ``photons``: SNR = 10 log10(Σ clean² / Σ (noisy − clean)²) over all
 samples; :func:`gain_for_snr` solves the expected noise power (Poisson + read + quantisation)
-for the gain, and :func:`add_noise` refines it with one secant step on the realised noise
+for the gain, and :func:`add_noise` refines it on the realised noise (a few steps)
 (clipping at 0 and full scale changes the noise of very dark or saturated samples).
 """
 
@@ -114,9 +114,11 @@ def add_noise(clean: np.ndarray, snr_db: float | None, photons: float | None,
     gain = gain_for_snr(s1, s2, flat.size, snr_db, read_noise)
     model = NoiseModel(gain, read_noise, bit_depth)
     noisy = apply_noise(clean, model, np.random.default_rng(seed))
-    got = measure_snr(clean, noisy)
-    if abs(got - snr_db) > 0.1:  # clipping moved it: one secant step in log(gain)
-        # noise power ~ gain (Poisson-dominated); correct the gain by the dB error
-        model = NoiseModel(gain * 10.0 ** ((got - snr_db) / 10.0), read_noise, bit_depth)
+    for _ in range(5):  # clipping moves the SNR: correct the gain on the realised noise
+        got = measure_snr(clean, noisy)
+        if abs(got - snr_db) <= 0.1:
+            break
+        # noise power ~ gain (Poisson-dominated): correct the gain by the dB error
+        model = NoiseModel(model.gain * 10.0 ** ((got - snr_db) / 10.0), read_noise, bit_depth)
         noisy = apply_noise(clean, model, np.random.default_rng(seed))
     return noisy, model
