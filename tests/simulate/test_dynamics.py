@@ -21,7 +21,7 @@ def test_each_frame_sees_the_scene_at_its_own_time():
     cap = simulate(scene, CFG, scan=3, motion=motion, comparison=False, scale=1.0)
     np.testing.assert_allclose(cap.truth, scene[5:125, 5:125], rtol=1e-6)
     p = 3
-    for t, (r, c) in enumerate(cap.scan_order):
+    for t, (r, c) in list(enumerate(cap.scan_order))[::4]:  # frames 0, 4, 8
         moved = motion.scene_at(scene, t - 4.0)
         ref = simulate(moved, CFG, scan=3, comparison=False, scale=1.0).views_clean
         np.testing.assert_allclose(cap.views_clean[:, :, r::p, c::p], ref[:, :, r::p, c::p],
@@ -96,6 +96,7 @@ def test_screen_phase_interpolates_samples():
     np.testing.assert_allclose(f(x, y), scr, atol=1e-9)
 
 
+@pytest.mark.slow
 def test_turbulence_capture_runs_and_differs_per_frame():
     cfg = ms.SystemConfig(sensor_shape=(132, 132))
     scene = np.zeros((132, 132), np.float32)
@@ -104,3 +105,5 @@ def test_turbulence_capture_runs_and_differs_per_frame():
                    comparison=False)
     assert cap.phase_screens.shape == (9, 16, 16)
     assert np.array_equal(ms.realign(cap.frames, cap.config), cap.views)
+    still = simulate(scene, cfg, scan=3, comparison=False, scale=cap.scale).views_clean
+    assert np.abs(cap.views_clean - still).max() > 0.05 * still.max()
