@@ -15,10 +15,9 @@ from metasensor.simulate.lens import SingleLens
 
 def _run(args):
     # typer collapses a one-command app; with other stages' commands it is a group
-    import click
     import typer
 
-    group = isinstance(typer.main.get_command(app), click.Group)
+    group = hasattr(typer.main.get_command(app), "commands")
     return CliRunner().invoke(app, (["simulate"] if group else []) + args)
 
 
