@@ -25,7 +25,7 @@ import numpy as np
 
 from metasensor.config import SystemConfig
 from metasensor.recon.blocks import Block, Stitcher, block_zernikes, split_blocks
-from metasensor.recon.isa import DEFAULT_ITERATIONS, DEFAULT_SUBSETS, view_order
+from metasensor.recon.isa import DEFAULT_ITERATIONS, DEFAULT_SUBSETS, subset_major, view_order
 
 __all__ = ["reconstruct", "Reconstruction", "BlockTask", "reconstruct_block"]
 
@@ -208,6 +208,9 @@ def reconstruct(views, cfg: SystemConfig, method: str = "isa", zernike=None, fie
     if not uv:
         raise ValueError(f"no views inside the pupil radius {view_radius!r}")
     n_subsets = DEFAULT_SUBSETS if subsets is None else int(subsets)
+    if n_subsets < 1:
+        raise ValueError(f"subsets must be >= 1, got {n_subsets}")
+    uv = subset_major(uv, n_subsets)
     from metasensor.backend import resolve_device
 
     dev = str(resolve_device(device))

@@ -169,12 +169,16 @@ class PhaseSpaceOperator:
     def predict(self, spec: torch.Tensor, views: slice | torch.Tensor) -> torch.Tensor:
         """View samples (c, My, Mx) of the views ``views`` from an image's half spectrum."""
         d = self.geometry.d
-        my, mx = self.geometry.grid
-        ny, nx = self.geometry.domain
-        otf = self.otf[views]
-        prod = otf * spec
-        folded = prod.view(-1, d, my, nx // 2 + 1).sum(dim=1)  # fold rows: sample every d-th row
-        rows = torch.fft.ifft(folded, dim=-2)
+        my, _ = self.geometry.grid
+        _, nx = self.geometry.domain
+        nh = nx // 2 + 1
+        otf = self.otf[views].view(-1, d, my, nh)
+        spec = spec.view(d, my, nh)
+        # fold the rows (sampling every d-th row): Σ_k OTF·G over the d row sub-bands, fused
+        folded = torch.mul(otf[:, 0], spec[0])
+        for k in range(1, d):
+            folded.addcmul_(otf[:, k], spec[k])
+        rows = torch.fft.ifft(folded, dim=-2)  # the sampled rows' half spectra along x
         full = torch.fft.irfft(rows, n=nx, dim=-1)
         return full[..., ::d] / d
 
@@ -185,10 +189,14 @@ class PhaseSpaceOperator:
         my, _ = self.geometry.grid
         ny, nx = self.geometry.domain
         nh = nx // 2 + 1
-        small = torch.fft.fft2(samples)  # (c, My, Mx): spectrum of the zero-filled array, tiled
-        tiled = small[..., self._cols]  # (c, My, Nh)
+        small = torch.fft.fft2(samples)  # (c, My, Mx): the zero-filled array's spectrum, tiled
+        tiled = small[..., self._cols].conj()  # (c, My, Nh)
         otf = self.otf[views]
-        acc = (otf.view(-1, d, my, nh).conj() * tiled[:, None]).sum(dim=0).view(ny, nh)
+        # accumulate conj(Σ OTF·conj(U)) = Σ conj(OTF)·U without materialising conj(OTF)
+        acc = torch.zeros((d, my, nh), dtype=torch.complex64, device=self.device)
+        for i in range(otf.shape[0]):
+            acc.addcmul_(otf[i].view(d, my, nh), tiled[i][None])
+        acc = acc.conj().reshape(ny, nh)
         if out is None:
             return acc
         out += acc
@@ -199,9 +207,12 @@ class PhaseSpaceOperator:
         return torch.fft.irfft2(spec, s=(ny, nx))
 
     def _chunks(self, views=None):
-        idx = torch.arange(self.n_views, device=self.device) if views is None else views
-        for i in range(0, len(idx), self.chunk):
-            yield idx[i:i + self.chunk]
+        if views is None:
+            for i in range(0, self.n_views, self.chunk):
+                yield slice(i, min(i + self.chunk, self.n_views))
+            return
+        for i in range(0, len(views), self.chunk):
+            yield views[i:i + self.chunk]
 
     # ------------------------------------------------------------------ the operator
     def forward(self, image, views=None) -> torch.Tensor:
@@ -224,13 +235,14 @@ class PhaseSpaceOperator:
         acc = torch.zeros((ny, nx // 2 + 1), dtype=torch.complex64, device=self.device)
         start = 0
         for c in self._chunks(views):
-            self.backproject_spectrum(samples[start:start + len(c)], c, out=acc)
-            start += len(c)
+            count = len(range(self.n_views)[c]) if isinstance(c, slice) else len(c)
+            self.backproject_spectrum(samples[start:start + count], c, out=acc)
+            start += count
         return self.image_from_spectrum(acc)
 
     def sensitivity(self, mask: torch.Tensor, views=None) -> torch.Tensor:
         """Aᵀ applied to ``mask`` (My, Mx) on every view in ``views``: (Ny, Nx), >= 0 up to fp."""
-        idx = torch.arange(self.n_views, device=self.device) if views is None else views
+        idx = slice(None) if views is None else views
         ny, nx = self.geometry.domain
         d = self.geometry.d
         my, _ = self.geometry.grid

@@ -28,8 +28,8 @@ import torch
 
 from metasensor.recon.forward import PhaseSpaceOperator
 
-__all__ = ["view_order", "make_subsets", "richardson_lucy", "RLResult", "DEFAULT_ITERATIONS",
-           "DEFAULT_SUBSETS"]
+__all__ = ["view_order", "make_subsets", "subset_major", "richardson_lucy", "RLResult",
+           "DEFAULT_ITERATIONS", "DEFAULT_SUBSETS"]
 
 DEFAULT_ITERATIONS = 5
 DEFAULT_SUBSETS = 8  # chosen by measurement (benchmarks/bench_isa.py): see recon/api.py
@@ -67,6 +67,21 @@ def make_subsets(n_views: int, n_subsets: int) -> list[list[int]]:
     return [list(range(k, n_views, n_subsets)) for k in range(n_subsets)]
 
 
+def subset_major(items: list, n_subsets: int) -> list:
+    """Reorder ``items`` (in visiting order) so each interleaved subset is a consecutive run.
+
+    :func:`richardson_lucy` takes subsets as consecutive runs of the operator's views (contiguous
+    OTF slices, no copies); feed it views in this order.
+    """
+    return [items[i] for g in make_subsets(len(items), n_subsets) for i in g]
+
+
+def _runs(n_views: int, n_subsets: int) -> list[slice]:
+    sizes = [len(g) for g in make_subsets(n_views, n_subsets)]
+    starts = np.cumsum([0] + sizes)
+    return [slice(int(a), int(b)) for a, b in zip(starts[:-1], starts[1:], strict=True)]
+
+
 @dataclass
 class RLResult:
     """Domain estimate (Ny, Nx) and the relative residual ||y − A I|| / ||y|| per iteration."""
@@ -83,7 +98,8 @@ def richardson_lucy(op: PhaseSpaceOperator, data: torch.Tensor, mask: torch.Tens
 
     data : (V, My, Mx) float view samples on the domain's sample grid (zero where unobserved),
         V in the operator's view order. mask : (My, Mx) bool, True on observed samples.
-    subsets : number of view subsets per iteration (1 = simultaneous, V = sequential per view).
+    subsets : number of view subsets per iteration (1 = simultaneous, V = sequential per view);
+        subset k is the k-th consecutive run of the operator's views (see :func:`subset_major`).
     Residual history: for subsets > 1 each subset's residual is taken before its own update.
     """
     dev = op.device
@@ -101,8 +117,7 @@ def richardson_lucy(op: PhaseSpaceOperator, data: torch.Tensor, mask: torch.Tens
     floor = eps * max(mean, 1e-30)
     data_norm = max(float(torch.linalg.vector_norm(data)), 1e-30)
 
-    groups = make_subsets(op.n_views, subsets)
-    idx = [torch.tensor(g, device=dev) for g in groups]
+    idx = _runs(op.n_views, subsets)
     sens = [op.sensitivity(maskf, g) for g in idx]
     valid = [s > 1e-6 * float(s.max()) for s in sens]
     sens = [torch.where(v, s, torch.ones_like(s)) for s, v in zip(sens, valid, strict=True)]
@@ -121,8 +136,8 @@ def richardson_lucy(op: PhaseSpaceOperator, data: torch.Tensor, mask: torch.Tens
         for g, s, v in zip(idx, sens, valid, strict=True):
             spec = op.spectrum(estimate)
             acc = torch.zeros((ny, nx // 2 + 1), dtype=torch.complex64, device=dev)
-            for start in range(0, len(g), op.chunk):
-                c = g[start:start + op.chunk]
+            for start in range(g.start, g.stop, op.chunk):
+                c = slice(start, min(start + op.chunk, g.stop))
                 pred = op.predict(spec, c)
                 y = data[c]
                 sq += float(torch.sum(((y - pred) * maskf) ** 2))
