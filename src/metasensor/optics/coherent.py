@@ -81,8 +81,9 @@ def pupil_samples(cfg: SystemConfig, plan: FieldPlan, zernike=None, depth: float
     rx, ry = pupil_grid(plan.pupil_n, plan.radius)
     step = 1.0 / plan.radius
     a = pupil_amplitude(cfg, rx, ry, step, amplitude)
-    w = pupil_phase(cfg, rx, ry, zernike, depth, phase)
-    w = np.where(a > 0, w, 0.0)
+    inside = a > 0
+    w = np.zeros(a.shape)
+    w[inside] = pupil_phase(cfg, rx[inside], ry[inside], zernike, depth, phase)
     if not np.isfinite(w).all():
         raise ValueError("pupil phase is not finite inside the pupil")
     norm = float(np.sum(disk_fraction(rx, ry, step) ** 2))

@@ -13,10 +13,11 @@ def register(app: typer.Typer) -> None:
     @app.command("psf")
     def psf_command(
         config: Path = typer.Option(..., "--config", help="system configuration (TOML)"),
-        out: Path = typer.Option(..., "--out", help="output HDF5 file (dataset 'psf' [u,v,y,x])"),
+        out: Path = typer.Option(..., "--out",
+                                 help="output HDF5 file (dataset 'psf', axes u, v, y, x)"),
         zernike: str = typer.Option("", "--zernike",
                                     help="Noll index:waves pairs, e.g. '4:0.5,7:-0.2'"),
-        depth: float = typer.Option(0.0, "--depth", help="defocus on the image side [m]"),
+        depth: float = typer.Option(0.0, "--depth", help="defocus on the image side, metres"),
         subsample: int = typer.Option(1, "--subsample", help="point positions per pixel (1, 3)"),
         size: int = typer.Option(0, "--size", help="PSF window K in pixels (odd; 0 = auto)"),
         png: Path = typer.Option(None, "--png", help="figure path (default: OUT with .png)"),

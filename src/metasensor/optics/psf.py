@@ -201,17 +201,10 @@ def view_psfs(cfg: SystemConfig, zernike=None, depth: float = 0.0, *,
         raise ValueError(f"oversample {os_} must be a multiple of subsample {sub}")
     dev = resolve_device(device)
     dx = cfg.pixel_pitch / os_
-    nnum = cfg.nnum
     gmax = _grad_max(cfg, z, depth, phase)
     if size is None:
         size = _default_size(cfg, z, depth, phase, amplitude, gmax, dev)
-    # lenslets whose pixels reach the window, plus one margin lenslet per side (cross-talk, and
-    # the wrap-around of the periodic grid lands outside the window)
-    m_win = (size // 2 + nnum // 2) // nnum
-    lenslets = 2 * (m_win + 1) + 1
-    while lenslets * nnum * os_ < cfg.mla_focal * cfg.wavelength / dx**2:
-        lenslets += 2  # angular-spectrum sampling condition z <= N dx² / λ
-    n = lenslets * nnum * os_
+    lenslets, n = _grid(cfg, size, os_)
     plan = plan_field(cfg, n, dx, gmax)
     a, w, norm = pupil_samples(cfg, plan, z, depth, phase, amplitude)
 
@@ -252,6 +245,24 @@ def _default_size(cfg, z, depth, phase, amplitude, gmax, dev) -> int:
     return k + 4
 
 
+def _grid(cfg: SystemConfig, size: int, os_: int) -> tuple[int, int]:
+    """(lenslets L per axis, samples n per axis) of the simulation grid for a K = size window:
+    the lenslets whose pixels reach the window plus one margin lenslet per side (cross-talk; the
+    wrap-around of the periodic grid lands in the margin), and n >= mla_focal·λ/dx²."""
+    nnum = cfg.nnum
+    dx = cfg.pixel_pitch / os_
+    lenslets = 2 * ((size // 2 + nnum // 2) // nnum + 1) + 1
+    while lenslets * nnum * os_ < cfg.mla_focal * cfg.wavelength / dx**2:
+        lenslets += 2  # angular-spectrum sampling condition z <= N dx² / λ
+    return lenslets, lenslets * nnum * os_
+
+
+def _batch_size(n: int, npos: int, dev: torch.device) -> int:
+    """Point positions per batch: ~384 MiB of complex work arrays on CPU, 4 GiB on CUDA."""
+    budget = (4 << 30) if dev.type == "cuda" else (384 << 20)
+    return max(1, min(npos, budget // (n * n * 8 * 3)))
+
+
 def _simulate_bank(cfg, u0: torch.Tensor, os_, sub, lenslets, size, dev) -> np.ndarray:
     """Bank (nnum, nnum, K·sub, K·sub) from the field ``u0`` (n, n) of a point at the centre of
     the central lenslet, on a grid of ``lenslets`` lenslets per axis (K = size)."""
@@ -262,36 +273,36 @@ def _simulate_bank(cfg, u0: torch.Tensor, os_, sub, lenslets, size, dev) -> np.n
     mla = tile.repeat(lenslets, lenslets)
     hz = torch.as_tensor(_transfer(n, dx, cfg.mla_focal, cfg.wavelength),
                          dtype=torch.complex64, device=dev)
-    half = (nnum * sub) // 2
-    offs = np.arange(-half, half + 1)
-    sy, sx = (g.ravel() for g in np.meshgrid(offs, offs, indexing="ij"))
+    npos = nnum * sub  # point positions per axis, s = half − i for i = 0 .. npos − 1
+    half = npos // 2
     step = os_ // sub  # grid samples per fine position
     kf = size * sub
     cf = kf // 2
     # one extra row and column collect the blocks that fall outside the window
     bank = torch.zeros((nnum, nnum, kf + 1, kf + 1), dtype=torch.float32, device=dev)
     mrange = (np.arange(lenslets) - lenslets // 2) * nnum * sub
-    budget = (2 << 30) if dev.type == "cuda" else (128 << 20)
-    batch = max(1, min(len(sy), budget // (n * n * 8 * 3)))
-    big = u0.repeat(2, 2)  # periodic copy: a shifted field is a window of it (no torch.roll)
-    work = torch.empty((batch, n, n), dtype=torch.complex64, device=dev)
+    # U0(r − s) for every s as one strided view of a periodic copy of U0 pre-shifted by
+    # +half·step: position (i, j) (s = (half − i, half − j)) starts at (i·step, j·step)
+    big = torch.roll(u0, (half * step, half * step), (0, 1)).repeat(2, 2).contiguous()
+    shifted = torch.as_strided(big, (npos, npos, n, n), (step * 2 * n, step, 2 * n, 1))
+    rows = max(1, _batch_size(n, npos * npos, dev) // npos)
+    offs = half - np.arange(npos)
     from tqdm.auto import tqdm
 
-    starts = range(0, len(sy), batch)
-    for s0 in tqdm(starts, desc="view PSFs", disable=None if len(starts) > 4 else True,
+    starts = range(0, npos, rows)
+    for r0 in tqdm(starts, desc="view PSFs", disable=None if len(starts) > 4 else True,
                    leave=False):
-        by, bx = sy[s0:s0 + batch], sx[s0:s0 + batch]
-        b = len(by)
-        u = work[:b]
-        for i in range(b):  # point at s: U0(r - s), times the lenslet array, in one pass
-            oy, ox = (-int(by[i]) * step) % n, (-int(bx[i]) * step) % n
-            torch.mul(big[oy:oy + n, ox:ox + n], mla, out=u[i])
+        r1 = min(npos, r0 + rows)
+        u = torch.mul(shifted[r0:r1], mla).reshape(-1, n, n)  # the point at s, times the MLA
         u = torch.fft.ifft2(torch.fft.fft2(u).mul_(hz))
         ri = torch.view_as_real(u)
         inten = ri[..., 0].square()
         inten.addcmul_(ri[..., 1], ri[..., 1])
         pix = _bin(inten, os_)
+        b = pix.shape[0]
         blocks = pix.reshape(b, lenslets, nnum, lenslets, nnum).permute(2, 4, 0, 1, 3)
+        by = np.repeat(offs[r0:r1], npos)
+        bx = np.tile(offs, r1 - r0)
         iy = cf + mrange[None, :] - by[:, None]
         ix = cf + mrange[None, :] - bx[:, None]
         iy = torch.as_tensor(np.where((iy >= 0) & (iy < kf), iy, kf), device=dev)[:, :, None]
