@@ -41,7 +41,7 @@ from metasensor.backend import resolve_device
 from metasensor.config import SystemConfig
 from metasensor.optics import cache as _cache
 from metasensor.optics.coherent import plan_field, point_field, pupil_samples
-from metasensor.optics.pupil import disk_fraction, pupil_phase
+from metasensor.optics.pupil import disk_fraction, pupil_amplitude, pupil_phase
 
 __all__ = ["view_psfs", "widefield_psf", "PSF_CODE_VERSION", "ENERGY_CUT"]
 
@@ -80,17 +80,22 @@ def _check_depth(depth) -> float:
 
 
 # ----------------------------------------------------------------------------- helpers
-def _grad_max(cfg: SystemConfig, zernike, depth: float, phase: PupilFn | None) -> float:
-    """max over the pupil of |∇W| in waves per unit rho (numerical gradient, 257² grid)."""
-    if zernike is None and depth == 0 and phase is None:
-        return 0.0
+def _reference_pupil(cfg: SystemConfig, zernike, depth: float, phase: PupilFn | None,
+                     amplitude) -> tuple[np.ndarray, np.ndarray, float]:
+    """The pupil evaluated on a fixed 257² grid over [-1.02, 1.02]²: amplitude, wavefront
+    [waves], and max over the pupil of |∇W| in waves per unit rho (numerical gradient).
+
+    The arrays key the cache (everything the bank depends on, before any heavy work)."""
     n = 257
     t = np.linspace(-1.02, 1.02, n)
     rx, ry = np.meshgrid(t, t, indexing="xy")
+    a = pupil_amplitude(cfg, rx, ry, t[1] - t[0], amplitude)
+    if zernike is None and depth == 0 and phase is None:
+        return a, np.zeros_like(a), 0.0
     w = pupil_phase(cfg, rx, ry, zernike, depth, phase)
     gy, gx = np.gradient(w, t[1] - t[0])
     inside = rx**2 + ry**2 <= 1.0
-    return float(np.nanmax(np.hypot(gx, gy)[inside]))
+    return a, np.where(a > 0, w, 0.0), float(np.nanmax(np.hypot(gx, gy)[inside]))
 
 
 def _ray_reach(cfg: SystemConfig, grad_max: float) -> float:
@@ -177,7 +182,9 @@ def view_psfs(cfg: SystemConfig, zernike=None, depth: float = 0.0, *,
     cfg : the system.
     zernike : Noll coefficient vector in waves (``z[j-1]`` = mode j), or None.
     depth : defocus of the point on the image side [m]; > 0 focused in front of the MLA.
-    phase : optional ``f(rho_x, rho_y) -> waves`` added to the Zernike wavefront.
+    phase : optional ``f(rho_x, rho_y) -> waves`` added to the Zernike wavefront; called with
+        arrays of pupil coordinates of any shape (e.g. 1-D: the samples inside the pupil),
+        must return that shape.
     amplitude : pupil amplitude: None (clear circle, annulus if ``cfg.obstruction``), an
         ``(nnum, nnum)`` map in view coordinates (nearest view), or ``f(rho_x, rho_y)``.
     subsample : odd; point positions every ``pixel_pitch / subsample``, output sampled at that
@@ -189,7 +196,9 @@ def view_psfs(cfg: SystemConfig, zernike=None, depth: float = 0.0, *,
     size : K, odd number of pixels per axis (None: the smallest K keeping >= 99.5 % of the
         light, see the module docstring).
     device : torch device (None: CUDA if available, else CPU).
-    cache : True (default cache folder), False (bypass) or a folder path.
+    cache : True (default cache folder, see :mod:`metasensor.optics.cache`), False (bypass) or
+        a folder path. The key hashes the code version, ``cfg.digest()``, the pupil amplitude
+        and wavefront evaluated on a fixed 257² grid, depth, subsample, size and oversample.
     oversample : simulation samples per pixel per axis (odd multiple of subsample; default >= 3).
     """
     z = _check_zernike(zernike)
@@ -201,22 +210,22 @@ def view_psfs(cfg: SystemConfig, zernike=None, depth: float = 0.0, *,
         raise ValueError(f"oversample {os_} must be a multiple of subsample {sub}")
     dev = resolve_device(device)
     dx = cfg.pixel_pitch / os_
-    gmax = _grad_max(cfg, z, depth, phase)
+    a_ref, w_ref, gmax = _reference_pupil(cfg, z, depth, phase, amplitude)
+    folder = None if cache is True or cache is False else Path(cache)
+    key = None
+    if cache is not False:
+        key = _cache.cache_key(PSF_CODE_VERSION, "view_psfs", cfg.digest(),
+                               a_ref.astype(np.float32), w_ref.astype(np.float32), depth, sub,
+                               size, os_)
+        hit = _cache.load(key, folder)
+        if hit is not None:
+            return hit
+
     if size is None:
         size = _default_size(cfg, z, depth, phase, amplitude, gmax, dev)
     lenslets, n = _grid(cfg, size, os_)
     plan = plan_field(cfg, n, dx, gmax)
     a, w, norm = pupil_samples(cfg, plan, z, depth, phase, amplitude)
-
-    folder = None if cache is True or cache is False else Path(cache)
-    key = None
-    if cache is not False:
-        key = _cache.cache_key(PSF_CODE_VERSION, "view_psfs", cfg.digest(), a.astype(np.float32),
-                               w.astype(np.float32), plan, depth, sub, size, os_, n)
-        hit = _cache.load(key, folder)
-        if hit is not None:
-            return hit
-
     u0 = point_field(cfg, plan, a, w, norm, n, dx, dev)
     out = _simulate_bank(cfg, u0, os_, sub, lenslets, size, dev)
     if key is not None:
@@ -346,7 +355,7 @@ def widefield_psf(cfg: SystemConfig, zernike=None, depth: float = 0.0, sampling=
             or not (math.isfinite(sampling) and sampling > 0):
         raise ValueError(f"sampling must be a positive pixel size in metres, got {sampling!r}")
     dev = resolve_device(device)
-    gmax = _grad_max(cfg, z, depth, phase)
+    gmax = _reference_pupil(cfg, z, depth, phase, amplitude)[2]
     if size is None:  # search window: the ray bundle plus 30 λ/NA
         reach = _ray_reach(cfg, gmax) + 30.0 * cfg.wavelength / cfg.na
         npix = 2 * math.ceil(reach / sampling) + 1
