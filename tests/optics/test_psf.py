@@ -58,6 +58,10 @@ def test_widefield_default_window_and_sum():
     assert psf.shape[0] % 2 == 1 and psf.dtype == np.float32
     assert 0.995 <= psf.sum() <= 1.0005
     assert np.unravel_index(np.argmax(psf), psf.shape) == (k, k)
+    # annular pupil (obstruction 0.3): the light reaching the image is 1 − 0.3² = 0.91, of
+    # which the default window keeps >= 99.5 % (less the sampled edges' 0.2 %): [0.99, 1.001]
+    ann = widefield_psf(cfg.replace(obstruction=0.3))
+    assert 0.99 * 0.91 <= ann.sum() <= 1.001 * 0.91
 
 
 @pytest.mark.parametrize("mode, axis", [(2, 1), (3, 0)])
