@@ -36,11 +36,11 @@ MIN_PUPIL_RADIUS = 96.0
 
 
 def next_fast_odd(n: int) -> int:
-    """Smallest odd integer >= n whose prime factors are 3, 5, 7 (fast FFT sizes)."""
+    """Smallest odd integer >= n whose prime factors are 3, 5, 7, 11 (fast FFT sizes)."""
     m = max(1, int(n)) | 1
     while True:
         k = m
-        for p in (3, 5, 7):
+        for p in (3, 5, 7, 11):
             while k % p == 0:
                 k //= p
         if k == 1:

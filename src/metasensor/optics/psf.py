@@ -40,7 +40,7 @@ import torch
 from metasensor.backend import resolve_device
 from metasensor.config import SystemConfig
 from metasensor.optics import cache as _cache
-from metasensor.optics.coherent import plan_field, point_field, pupil_samples
+from metasensor.optics.coherent import next_fast_odd, plan_field, point_field, pupil_samples
 from metasensor.optics.pupil import disk_fraction, pupil_amplitude, pupil_phase
 
 __all__ = ["view_psfs", "widefield_psf", "PSF_CODE_VERSION", "ENERGY_CUT"]
@@ -257,12 +257,14 @@ def _default_size(cfg, z, depth, phase, amplitude, gmax, dev) -> int:
 def _grid(cfg: SystemConfig, size: int, os_: int) -> tuple[int, int]:
     """(lenslets L per axis, samples n per axis) of the simulation grid for a K = size window:
     the lenslets whose pixels reach the window plus one margin lenslet per side (cross-talk; the
-    wrap-around of the periodic grid lands in the margin), and n >= mla_focal·λ/dx²."""
+    wrap-around of the periodic grid lands in the margin), and n >= mla_focal·λ/dx²; L is
+    rounded up to an 11-smooth odd number (fast FFT sizes)."""
     nnum = cfg.nnum
     dx = cfg.pixel_pitch / os_
     lenslets = 2 * ((size // 2 + nnum // 2) // nnum + 1) + 1
     while lenslets * nnum * os_ < cfg.mla_focal * cfg.wavelength / dx**2:
         lenslets += 2  # angular-spectrum sampling condition z <= N dx² / λ
+    lenslets = next_fast_odd(lenslets)  # 11-smooth: fast FFT sizes
     return lenslets, lenslets * nnum * os_
 
 
