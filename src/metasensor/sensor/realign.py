@@ -15,7 +15,7 @@ from collections.abc import Iterable, Iterator
 import numpy as np
 
 from metasensor.config import SystemConfig
-from metasensor.sensor.gather import gather_views
+from metasensor.sensor.gather import gather_views, scatter_views
 from metasensor.sensor.scan import check_scan_order
 
 __all__ = ["realign", "unrealign", "lenslet_counts", "realign_sequence", "phase_offsets"]
@@ -142,7 +142,8 @@ def _realign_torch(frames, cfg: SystemConfig, order, moving: str, margin: int):
 
 
 def unrealign(views, cfg: SystemConfig, scan_order=None, moving: str = "mla",
-              frame_shape: tuple[int, int] | None = None) -> np.ndarray:
+              frame_shape: tuple[int, int] | None = None, *, engine: str = "auto"
+              ) -> np.ndarray:
     """Views ``(nnum, nnum, Ly*p, Lx*p)`` → raw frames ``(T, H, W)``: the exact inverse of
     :func:`realign` on the lenslet blocks (pixels outside every block are zero).
 
@@ -164,11 +165,8 @@ def unrealign(views, cfg: SystemConfig, scan_order=None, moving: str = "mla",
             frame_shape[1] < lx * n + margin:
         raise ValueError(f"frame_shape {frame_shape} cannot hold {ly}x{lx} lenslets over the scan")
     frames = np.zeros((p * p, *frame_shape), dtype=views.dtype)
-    for t, (oy, ox) in enumerate(phase_offsets(order, cfg, moving)):
-        r, c = order[t]
-        block = views[:, :, r::p, c::p].transpose(2, 0, 3, 1).reshape(ly * n, lx * n)
-        frames[t, oy:oy + ly * n, ox:ox + lx * n] = block
-    return frames
+    return scatter_views(views, frames, order, phase_offsets(order, cfg, moving), n, p, ly, lx,
+                         engine=engine)
 
 
 def realign_sequence(frames: Iterable[np.ndarray], cfg: SystemConfig, scan_order=None,
