@@ -83,6 +83,13 @@ def test_calibrate_then_realign(capture):
     est = views * fv
     psnr = 10 * np.log10(truth.max() ** 2 / np.mean((est[bright] - truth[bright]) ** 2))
     assert psnr >= 40, psnr
+    res = run("realign", root / "raw.tif", "--calib", root / "calib.toml", "--scan", 3,
+              "--order", "serpentine", "--out", root / "views16.tif", "--dtype", "input")
+    assert res.exit_code == 0, res.output
+    v16 = read_views(root / "views16.tif")
+    assert v16.dtype == np.uint16
+    lit = fv > 0.05  # where --flat divided (elsewhere it wrote 0)
+    assert np.abs(v16 - read_views(root / "views.tif") * fv)[lit].max() <= 0.51
     assert all(digest(root / p) == s for p, s in sums.items())
 
 

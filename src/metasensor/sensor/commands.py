@@ -107,6 +107,8 @@ def realign_cmd(
     method: str = typer.Option("lanczos", "--method", help="interpolator: lanczos|spline|cubic"),
     apply_flat: bool = typer.Option(False, "--flat", help="divide by the calibration's flat "
                                     "field"),
+    dtype: str = typer.Option("float32", "--dtype", help="rectified views: float32, or input "
+                              "(round back to the raw integer type: half the memory)"),
 ) -> None:
     """Realign raw frames into view stacks (page u*nnum + v = view (u, v)).
 
@@ -124,6 +126,8 @@ def realign_cmd(
     from metasensor.sensor.realign import realign_sequence
     from metasensor.sensor.rectify import check_fits, rectify_frames
 
+    if dtype not in ("float32", "input"):
+        raise ValueError(f"--dtype must be float32 or input, got {dtype!r}")
     if offsets not in ("measure", "calib", "nominal"):
         raise ValueError(f"--offsets must be measure, calib or nominal, got {offsets!r}")
     if out.suffix.lower() not in (".tif", ".tiff", ".zarr"):
@@ -158,6 +162,8 @@ def realign_cmd(
                 off = "nominal"
             stream = rectify_frames(stream, calib, phases, offsets=off,
                                     start_phase=start_phase, method=method)
+            if dtype == "input" and raw.dtype.kind in "ui":
+                stream = _round_to(stream, raw.dtype)
         flat = None
         if apply_flat:
             flat = _flat(calib, calib_path, cfg)
@@ -175,6 +181,12 @@ def realign_cmd(
             written.append(path)
     typer.echo(f"-> {written[0]}" + (f" ... {written[-1]} ({len(written)} stacks)"
                                      if len(written) > 1 else ""))
+
+
+def _round_to(frames, dtype):
+    info = np.iinfo(dtype)
+    for frame in frames:
+        yield np.clip(np.rint(frame), info.min, info.max).astype(dtype)
 
 
 def _calibration_figure(frame: np.ndarray, calib, path: Path) -> None:
