@@ -180,7 +180,9 @@ def realign_sequence(frames: Iterable[np.ndarray], cfg: SystemConfig, scan_order
     ``t .. t+T-1`` and one view stack is yielded per frame from frame ``T-1`` on (N - T + 1
     stacks for N frames). ``sliding=False``: one stack per complete period (N must then be a
     multiple of T). Only the last T frames are held in memory (a ring buffer in which slot s
-    always holds the latest frame of phase ``order[s]``). Each yielded array is new.
+    always holds the latest frame of phase ``order[s]``); after the first window only the new
+    frame's phase is realigned into an internal stack, and a copy of it is yielded (a memory
+    copy plus 1/T of a realignment per frame). Each yielded array is new.
     """
     p, _, margin = _geometry(cfg, moving)
     order = check_scan_order(scan_order, p)
@@ -189,6 +191,7 @@ def realign_sequence(frames: Iterable[np.ndarray], cfg: SystemConfig, scan_order
         raise ValueError(f"start_phase must be an integer in 0..{tp - 1}, got {start_phase!r}")
     offsets = phase_offsets(order, cfg, moving)
     ring: np.ndarray | None = None
+    state: np.ndarray | None = None
     count = 0
     for f, frame in enumerate(frames):
         frame = np.asarray(frame)
@@ -202,12 +205,25 @@ def realign_sequence(frames: Iterable[np.ndarray], cfg: SystemConfig, scan_order
             raise ValueError(f"frame {f} is {frame.dtype} {frame.shape}, unlike the first frame "
                              f"({ring.dtype} {ring.shape[1:]})")
         _check_finite(frame[None], f"frame {f}")
-        ring[(f + start_phase) % tp] = frame
+        slot = (f + start_phase) % tp
+        ring[slot] = frame
         count = f + 1
-        if count >= tp and (sliding or count % tp == 0):
-            ly, lx = lenslet_counts(ring.shape[1:], cfg, moving)
-            out = np.empty((cfg.nnum, cfg.nnum, ly * p, lx * p), dtype=ring.dtype)
-            yield gather_views(ring, out, order, offsets, cfg.nnum, p, ly, lx, engine=engine)
+        if count < tp or not (sliding or count % tp == 0):
+            continue
+        n = cfg.nnum
+        ly, lx = lenslet_counts(ring.shape[1:], cfg, moving)
+        if sliding and state is not None:
+            # only the new frame's phase changed: replace its samples in the internal stack
+            (r, c), (oy, ox) = order[slot], offsets[slot]
+            block = frame[oy:oy + ly * n, ox:ox + lx * n].reshape(ly, n, lx, n)
+            state[:, :, r::p, c::p] = block.transpose(1, 3, 0, 2)
+            yield state.copy()
+            continue
+        out = np.empty((n, n, ly * p, lx * p), dtype=ring.dtype)
+        gather_views(ring, out, order, offsets, n, p, ly, lx, engine=engine)
+        if sliding:
+            state = out.copy()
+        yield out
     if count < tp:
         raise ValueError(f"got {count} frames but one {p}x{p} scan period needs {tp}")
     if not sliding and count % tp:
