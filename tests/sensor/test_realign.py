@@ -74,8 +74,8 @@ def test_contract_sample_origin(moving):
         assert views[u, v, y, x] == frames[t, sy, sx]
 
 
-@pytest.mark.parametrize("dtype", [np.uint16, np.float32])
-def test_compiled_gather_equals_numpy(dtype):
+def test_compiled_gather_equals_numpy(dtype=np.uint16):
+    """The compiled kernels (the raw frames' uint16; other dtypes share the same code)."""
     pytest.importorskip("numba")
     cfg = SystemConfig()
     rng = np.random.default_rng(3)
@@ -87,6 +87,11 @@ def test_compiled_gather_equals_numpy(dtype):
         np.testing.assert_array_equal(a, b)
     out = np.empty_like(a)
     assert realign(frames, cfg, order, "image", out=out) is out
+    for moving in ("mla", "image"):
+        views = realign(frames, cfg, order, moving)
+        np.testing.assert_array_equal(
+            unrealign(views, cfg, order, moving, frames.shape[1:], engine="numba"),
+            unrealign(views, cfg, order, moving, frames.shape[1:], engine="numpy"))
 
 
 def test_realign_sequence_sliding_window():
@@ -95,7 +100,10 @@ def test_realign_sequence_sliding_window():
     rng = np.random.default_rng(4)
     seq = rng.integers(0, 1000, (22, 30, 33)).astype(np.uint16)
     for start in (0, 4):
-        stacks = list(realign_sequence(iter(seq), cfg, order, start_phase=start))
+        stacks = []
+        for views in realign_sequence(iter(seq), cfg, order, start_phase=start):
+            stacks.append(views.copy())
+            views[...] = 0  # the caller may modify what it gets
         assert len(stacks) == 22 - 9 + 1
         for t in (0, 5, 13):
             win = np.empty((9, 30, 33), np.uint16)
@@ -151,3 +159,19 @@ def test_bad_scan_order_and_moving():
         realign(frames, cfg, moving="sensor")
     with pytest.raises(ValueError, match="start_phase"):
         list(realign_sequence(frames, cfg, start_phase=9))
+
+
+def test_torch_tensor_realigned_on_its_device():
+    import torch
+
+    from metasensor.backend import resolve_device
+
+    cfg = SystemConfig(nnum=9, scan=3)
+    frames = np.random.default_rng(5).random((9, 40, 44)).astype(np.float32)
+    ref = realign(frames, cfg, "serpentine")
+    dev = resolve_device(None)  # CUDA when present, else CPU: the same code
+    got = realign(torch.from_numpy(frames).to(dev), cfg, "serpentine")
+    assert isinstance(got, torch.Tensor) and got.device.type == dev.type
+    np.testing.assert_array_equal(got.cpu().numpy(), ref)
+    with pytest.raises(ValueError, match="needs 9"):
+        realign(torch.zeros(8, 40, 44), cfg)
