@@ -7,7 +7,7 @@ import h5py
 import numpy as np
 import pytest
 import tifffile
-from recon_standin import gaussian_psfs, synth_views
+from recon_standin import gaussian_psfs, one_torch_thread, synth_views  # noqa: F401
 from typer.testing import CliRunner
 
 from metasensor.cli import app
