@@ -40,8 +40,8 @@ def _rectify_rows(quick: bool) -> list[dict]:
 
     side = 600 if quick else 2000
     frame = np.random.default_rng(1).integers(0, 4096, (side, side), dtype=np.uint16)
-    ly = int((side - 40) / 15.1)
-    calib = Calibration(nnum=15, pitch=15.1, rotation=0.3, center=(12.3, 14.1),
+    ly = int((side - 80) / 15.1)
+    calib = Calibration(nnum=15, pitch=15.1, rotation=0.3, center=(30.3, 34.1),
                         lenslets=(ly, ly), sensor_shape=(side, side))
     rows = []
     for method in ("spline", "lanczos", "cubic"):

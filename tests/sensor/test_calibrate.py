@@ -116,3 +116,37 @@ def test_calibration_toml_round_trip(tmp_path):
     back = Calibration.from_toml(path)
     assert back == calib
     assert "measured - nominal" in path.read_text()
+
+
+def test_bad_calibration_inputs(tmp_path):
+    from metasensor.sensor.rectify import check_fits
+
+    cap = make_capture(7, scan=1, jitter=0, shape=(200, 210))
+    calib = calibrate(cap["white"], N)
+    with pytest.raises(ValueError, match="calibration is for 200x210 frames, got 180x210"):
+        rectify_frame(cap["white"][:180], calib)
+    with pytest.raises(ValueError, match="nnum 15"):
+        check_fits(calib, (200, 210), nnum=9)
+    with pytest.raises(ValueError, match="no lenslet grid"):
+        calibrate(np.random.default_rng(0).random((200, 210)) * 0 + 1.0, N)
+    with pytest.raises(ValueError, match="too small"):
+        calibrate(cap["white"][:30, :30], N)
+    bad = cap["white"].copy()
+    bad[3, 3] = np.nan
+    with pytest.raises(ValueError, match="NaN"):
+        calibrate(bad, N)
+    with pytest.raises(TypeError, match="dtype|image"):
+        calibrate(cap["white"].astype(np.complex64), N)
+    path = tmp_path / "c.toml"
+    path.write_text("[calibration]\nnnum = 15\npitch = 15.0\n")
+    with pytest.raises(ValueError, match="incomplete calibration"):
+        Calibration.from_toml(path)
+    path.write_text("not = [toml")
+    with pytest.raises(ValueError, match="invalid calibration TOML"):
+        Calibration.from_toml(path)
+    with pytest.raises(FileNotFoundError):
+        Calibration.from_toml(tmp_path / "missing.toml")
+    # a calibration whose grid would put lenslet blocks off this sensor
+    off = calib.replace(center=(calib.center[0] - 40.0, calib.center[1]))
+    with pytest.raises(ValueError, match="does not fit"):
+        rectify_frame(cap["white"], off)

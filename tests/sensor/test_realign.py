@@ -151,3 +151,19 @@ def test_bad_scan_order_and_moving():
         realign(frames, cfg, moving="sensor")
     with pytest.raises(ValueError, match="start_phase"):
         list(realign_sequence(frames, cfg, start_phase=9))
+
+
+def test_torch_tensor_realigned_on_its_device():
+    import torch
+
+    from metasensor.backend import resolve_device
+
+    cfg = SystemConfig(nnum=9, scan=3)
+    frames = np.random.default_rng(5).random((9, 40, 44)).astype(np.float32)
+    ref = realign(frames, cfg, "serpentine")
+    dev = resolve_device(None)  # CUDA when present, else CPU: the same code
+    got = realign(torch.from_numpy(frames).to(dev), cfg, "serpentine")
+    assert isinstance(got, torch.Tensor) and got.device.type == dev.type
+    np.testing.assert_array_equal(got.cpu().numpy(), ref)
+    with pytest.raises(ValueError, match="needs 9"):
+        realign(torch.zeros(8, 40, 44), cfg)

@@ -80,3 +80,17 @@ def gather_views(frames, out: np.ndarray, order: list[tuple[int, int]],
     offx = np.array([o[1] for o in offsets], dtype=np.int64)
     _gather_numba(frames, out, tidx, offy, offx, n, p, ly, lx)
     return out
+
+
+def gather_views_torch(frames, order: list[tuple[int, int]], offsets: list[tuple[int, int]],
+                       n: int, p: int, ly: int, lx: int):
+    """The same gather for a torch tensor ``(T, H, W)`` on its own device (CUDA: at GPU memory
+    speed); returns a new tensor ``(n, n, ly*p, lx*p)``."""
+    import torch
+
+    out = torch.empty((n, n, ly * p, lx * p), dtype=frames.dtype, device=frames.device)
+    for t, (r, c) in enumerate(order):
+        oy, ox = offsets[t]
+        block = frames[t, oy:oy + ly * n, ox:ox + lx * n].reshape(ly, n, lx, n)
+        out[:, :, r::p, c::p] = block.permute(1, 3, 0, 2)
+    return out

@@ -98,10 +98,13 @@ def realign(frames, cfg: SystemConfig, scan_order=None, moving: str = "mla", *,
     list of (row, col) phases). The output keeps the frames' dtype, so integer data are
     realigned exactly. ``out``: optional preallocated C-contiguous output of that shape and
     dtype. ``engine``: ``"auto"`` (compiled gather for large data), ``"numba"`` or ``"numpy"``.
-    The input is never modified.
+    The input is never modified. A torch tensor (e.g. on CUDA) is realigned on its device and
+    a new tensor is returned.
     """
     p, _, margin = _geometry(cfg, moving)
     order = check_scan_order(scan_order, p)
+    if type(frames).__module__.startswith("torch"):
+        return _realign_torch(frames, cfg, order, moving, margin)
     frames = _check_frames(frames, cfg, p, margin)
     n = cfg.nnum
     ly, lx = lenslet_counts(frames.shape[1:], cfg, moving)
@@ -114,6 +117,28 @@ def realign(frames, cfg: SystemConfig, scan_order=None, moving: str = "mla", *,
                          f"{shape}, got {out.dtype} {out.shape}")
     return gather_views(frames, out, order, phase_offsets(order, cfg, moving), n, p, ly, lx,
                         engine=engine)
+
+
+def _realign_torch(frames, cfg: SystemConfig, order, moving: str, margin: int):
+    import torch
+
+    from metasensor.sensor.gather import gather_views_torch
+
+    p = cfg.scan
+    if frames.ndim != 3:
+        raise ValueError(f"frames must be a (T, H, W) tensor, got shape {tuple(frames.shape)}")
+    if frames.dtype in (torch.bool, torch.float16, torch.bfloat16) or frames.is_complex():
+        raise TypeError(f"frames must be an integer or float32/float64 tensor, got dtype "
+                        f"{frames.dtype}")
+    if frames.shape[0] != p * p:
+        raise ValueError(f"got {frames.shape[0]} frames but one {p}x{p} scan period needs "
+                         f"{p * p}")
+    _check_size(tuple(frames.shape[1:]), cfg, margin)
+    if frames.is_floating_point() and not bool(torch.isfinite(frames).all()):
+        raise ValueError("frames contain NaN or infinite values")
+    ly, lx = lenslet_counts(tuple(frames.shape[1:]), cfg, moving)
+    return gather_views_torch(frames, order, phase_offsets(order, cfg, moving), cfg.nnum, p,
+                              ly, lx)
 
 
 def unrealign(views, cfg: SystemConfig, scan_order=None, moving: str = "mla",
