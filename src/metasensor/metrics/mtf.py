@@ -34,6 +34,8 @@ import numpy as np
 __all__ = ["EdgeMTF", "slanted_edge_mtf", "measure_edge", "mtf50", "mtf_at", "check_roi"]
 
 _WINDOWS = ("hamming", "tukey", "none")
+TAIL_CORE = 2.5  # LSF core kept unsmoothed: this many 10-90 % edge widths each side
+TAIL_TAPER = 0.5  # blend from core to smoothed tails over this fraction of the core
 
 
 @dataclass(frozen=True)
@@ -204,7 +206,7 @@ def _smooth_tails(lsf: np.ndarray, mid: float, core: float, oversample: int) -> 
     from scipy.ndimage import gaussian_filter1d
 
     x = np.abs(np.arange(lsf.size) - mid)
-    t = np.clip((x - core) / core, 0.0, 1.0)
+    t = np.clip((x - core) / (TAIL_TAPER * core), 0.0, 1.0)
     keep = 0.5 * (1 + np.cos(np.pi * t))
     tail = gaussian_filter1d(lsf * (1 - keep), float(oversample), mode="constant")
     return lsf * keep + tail
@@ -261,6 +263,12 @@ def measure_edge(image, roi=None, *, oversample: int = 4, window: str = "hamming
         raise ValueError(f"no edge found in roi {roi}: contrast {abs(contrast):.3g} is not above "
                          f"the noise {noise:.3g}")
 
+    q = max(1, a.shape[1] // 5)
+    steps = a[:, -q:].mean(axis=1) - a[:, :q].mean(axis=1)
+    steps = np.convolve(steps, np.ones(3) / 3, mode="valid") * np.sign(contrast)
+    if steps.min() < 0.5 * abs(contrast):
+        raise ValueError(f"roi {roi} does not hold one straight edge across all its rows "
+                         f"(a corner or several edges?)")
     c0, c1 = _fit_edge(a)
     ny, nx = a.shape
     angle = math.degrees(math.atan(c1))
@@ -309,7 +317,7 @@ def measure_edge(image, roi=None, *, oversample: int = 4, window: str = "hamming
     lsf = lsf * np.sign(lsf.sum())
     mid, width = _lsf_centre_width(esf * np.sign(esf[-1] - esf[0]), oversample)
     if tail_smoothing:
-        lsf = _smooth_tails(lsf, mid, max(4.0 * width, 6.0 * oversample), oversample)
+        lsf = _smooth_tails(lsf, mid, max(TAIL_CORE * width, 4.0 * oversample), oversample)
     half = max(mid, lsf.size - 1 - mid)
     lsf_w = lsf * _window(lsf.size, mid, half, window)
 
