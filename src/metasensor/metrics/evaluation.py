@@ -21,7 +21,7 @@ from metasensor.metrics.quality import psnr, ssim
 __all__ = ["evaluate", "evaluate_full", "write_evaluation", "CSV_COLUMNS"]
 
 CSV_COLUMNS = ("index", "y0", "y1", "x0", "x1", "centre_y", "centre_x", "field_radius",
-               "orientation", "angle_deg", "mtf50", "mtf50_lpmm", "mtf_at_nyquist_half",
+               "orientation", "angle_deg", "mtf50", "mtf50_lpmm", "mtf_at_0.25cpp",
                "error")
 
 
@@ -67,7 +67,7 @@ def evaluate_full(image, truth=None, chart: bool = False, rois=None, *,
                 keep = res.freq <= 0.5 + 1e-9
                 row.update(orientation=res.orientation, angle_deg=res.angle_deg,
                            mtf50=_finite(res.mtf50), mtf50_lpmm=_finite(res.mtf50_lpmm),
-                           mtf_at_nyquist_half=float(res.at(0.25)),
+                           **{"mtf_at_0.25cpp": float(res.at(0.25))},
                            freq=[round(float(f), 5) for f in res.freq[keep]],
                            mtf=[round(float(m), 5) for m in res.mtf[keep]])
             rows.append(row)
@@ -105,7 +105,7 @@ def _csv_text(result: dict) -> str:
                 "" if r.get("angle_deg") is None else f"{r['angle_deg']:.3f}",
                 "" if r.get("mtf50") is None else f"{r['mtf50']:.5f}",
                 "" if r.get("mtf50_lpmm") is None else f"{r['mtf50_lpmm']:.3f}",
-                "" if r.get("mtf_at_nyquist_half") is None else f"{r['mtf_at_nyquist_half']:.4f}",
+                "" if r.get("mtf_at_0.25cpp") is None else f"{r['mtf_at_0.25cpp']:.4f}",
                 r.get("error") or ""]
         w.writerow(vals)
     return buf.getvalue()

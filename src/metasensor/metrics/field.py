@@ -165,13 +165,20 @@ class FieldMTF:
         return out
 
     def positions(self, n: int = 4) -> list[int]:
-        """Indices of up to ``n`` measured ROIs spread over the field radius (centre to edge)."""
+        """Indices of up to ``n`` measured ROIs at distinct field radii spread from the centre
+        to the edge (the ROI nearest to each of ``n`` evenly spaced target radii)."""
         ok = np.flatnonzero(np.isfinite(self.mtf50))
         if ok.size == 0:
             return []
-        order = ok[np.argsort(self.radius[ok])]
-        pick = np.unique(np.round(np.linspace(0, order.size - 1, min(n, order.size))).astype(int))
-        return [int(order[i]) for i in pick]
+        r = self.radius[ok]
+        picked: list[int] = []
+        for target in np.linspace(r.min(), r.max(), n):
+            free = [i for i in range(ok.size) if not any(
+                abs(r[i] - self.radius[j]) < 0.02 for j in picked)]
+            if not free:
+                break
+            picked.append(int(ok[min(free, key=lambda i: abs(r[i] - target))]))
+        return sorted(picked, key=lambda j: self.radius[j])
 
 
 def field_mtf(image, rois=None, *, reference=None, pixel_pitch: float | None = None,
