@@ -154,7 +154,8 @@ def write_evaluation(out_dir: str | Path, result: dict, fm: FieldMTF | None = No
             panels += [("truth", np.asarray(truth)),
                        ("result - truth", np.asarray(image, float) - np.asarray(truth, float))]
         boxes = [tuple(r) for r in fm.rois] if fm is not None else None
-        written.append(save_panel(out / "images.png", panels[:2], boxes=boxes))
+        written.append(save_panel(out / "images.png", panels[:2], boxes=boxes,
+                                  shared_range=False))
         if truth is not None:
             written.append(save_panel(out / "difference.png", panels[2:], cmap="RdBu_r",
                                       shared_range=False))
