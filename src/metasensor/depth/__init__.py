@@ -1,1 +1,10 @@
-"""Disparity and depth from the views."""
+"""Disparity and depth from the views (multi-view stereo over the view grid).
+
+Public: :func:`estimate_depth` and :class:`DepthResult` (``metasensor.depth.estimate``); the
+geometry conversions in ``metasensor.depth.geometry``; the aberration warp in
+``metasensor.depth.aberration``; geometric test scenes in ``metasensor.depth.synthetic``.
+"""
+
+from metasensor.depth.estimate import DepthResult, estimate_depth
+
+__all__ = ["DepthResult", "estimate_depth"]

@@ -32,7 +32,7 @@ def write_views(path: str | Path, views: np.ndarray, cfg: SystemConfig | None = 
 
     views = _check_views(views)
     path = Path(path)
-    meta = {"metasensor": {"kind": "views", "shape": list(views.shape)}}
+    meta = {"metasensor": {"kind": "views", "view_shape": list(views.shape)}}
     if cfg is not None:
         meta["metasensor"]["config"] = cfg.to_dict()
     if extra:
@@ -45,6 +45,7 @@ def write_views(path: str | Path, views: np.ndarray, cfg: SystemConfig | None = 
     pages = views.reshape(n * n, *views.shape[2:])
     with atomic_path(path) as tmp:
         tifffile.imwrite(tmp, pages, description=json.dumps(meta), metadata=None,
+                         photometric="minisblack",
                          bigtiff=pages.nbytes > 2**31)
     return path
 
@@ -92,6 +93,8 @@ def read_views(path: str | Path, nnum: int | None = None, mmap: bool = False) ->
             pages = tif.asarray(out="memmap") if mmap else tif.asarray()
     except Exception as exc:  # tifffile raises many types for corrupt files
         raise ValueError(f"{path}: not a readable TIFF view stack ({exc})") from None
+    if pages.size == 0:
+        raise ValueError(f"{path}: not a readable TIFF view stack (no image data)")
     if pages.ndim == 2:
         pages = pages[None]
     if pages.ndim != 3:

@@ -1,0 +1,162 @@
+"""Dense disparity, confidence and metric depth from a view stack (multi-view stereo).
+
+Pipeline (system.md §2 step 7, the paper's Fig. 6):
+
+1. Views inside the pupil (``cfg.view_mask()``), each divided by its mean (vignetting and the
+   coded aperture dim the outer views); optionally warped by the system aberration's per-view
+   shift maps (``calibration``) so that only the parallax is left.
+2. Plane sweep: a cost volume over ``candidates`` disparities (variance of the aligned views, or
+   SAD to the centre view; optional half-pupil occlusion handling), each slice aggregated by a
+   guided filter steered by the centre view (edge-aware cost-volume filtering, Hosni et al. 2013).
+3. Winner-take-all with a parabola fit, a peak-ratio confidence, then Gauss–Newton refinement of
+   the disparity on the views themselves (continuous, no candidate grid).
+4. Optional confidence-weighted, edge-aware filling of low-confidence pixels.
+5. Disparity → image-side depth ``z = δ · d · mla_focal``; with the main-lens focal length and
+   focus distance (config or keywords), → object distance by the thin-lens equation
+   (``metasensor.depth.geometry`` states the signs).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from metasensor.backend import resolve_device, to_numpy
+from metasensor.config import SystemConfig
+from metasensor.depth import geometry
+from metasensor.depth.aberration import resolve_shift_maps, warp_views
+from metasensor.depth.cost import CostVolume
+from metasensor.depth.filters import GuidedFilter
+from metasensor.depth.refine import (
+    fill_low_confidence,
+    gauss_newton_refine,
+    peak_ratio_confidence,
+    subpixel_minimum,
+)
+
+__all__ = ["DepthResult", "estimate_depth"]
+
+
+@dataclass(frozen=True)
+class DepthResult:
+    """Result of :func:`estimate_depth`; every map is ``(H, W)`` on the view grid.
+
+    disparity : float32, view pixels per view step; view (u, v) content at
+        ``p + disparity · (u − c, v − c)`` equals the centre view's at ``p``.
+    confidence : float32 in [0, 1] (peak ratio of the aggregated cost curve).
+    image_depth : float32 metres, image-side depth ``z = disparity · d · mla_focal`` (``z > 0``:
+        focused in front of the MLA, towards the main lens; d = nnum // scan).
+    object_distance : float32 metres from the main lens (thin lens), or ``None`` without
+        ``focal_length`` and ``focus_distance``; NaN where no real object maps there.
+    depth : the metric depth: ``object_distance`` when the main-lens geometry is known, else
+        ``image_depth``; ``depth_kind`` says which (``"object"`` or ``"image"``).
+    candidates : the candidate disparities of the plane sweep (view px per view step).
+    """
+
+    disparity: np.ndarray
+    confidence: np.ndarray
+    image_depth: np.ndarray
+    object_distance: np.ndarray | None
+    depth: np.ndarray
+    depth_kind: str
+    candidates: np.ndarray
+    config: SystemConfig
+
+
+def _check_views(views, cfg: SystemConfig) -> np.ndarray:
+    if hasattr(views, "views") and not isinstance(views, np.ndarray):  # a Capture
+        views = views.views
+    arr = np.asarray(views)
+    if arr.ndim != 4 or arr.shape[0] != arr.shape[1]:
+        raise ValueError(f"views must have shape (nnum, nnum, H, W), got {arr.shape}")
+    if arr.shape[0] != cfg.nnum:
+        raise ValueError(f"views have {arr.shape[0]} x {arr.shape[1]} views but cfg.nnum is "
+                         f"{cfg.nnum}")
+    if min(arr.shape[2:]) < 4:
+        raise ValueError(f"views are too small for depth estimation: {arr.shape[2:]}")
+    if not np.issubdtype(arr.dtype, np.number) or np.iscomplexobj(arr):
+        raise TypeError(f"views must be real numbers, got dtype {arr.dtype}")
+    return arr
+
+
+def estimate_depth(views, cfg: SystemConfig, calibration=None, *, candidates: int = 64,
+                   disparity_range: tuple[float, float] | None = None,
+                   view_mask: np.ndarray | None = None, cost: str = "variance",
+                   occlusion: bool = True, radius: int = 4, eps: float = 0.01,
+                   refine_iterations: int = 2, fill: bool = False, normalize: bool = True,
+                   focal_length: float | None = None, focus_distance: float | None = None,
+                   device=None, progress: bool = False) -> DepthResult:
+    """Disparity, confidence and depth from views ``(nnum, nnum, H, W)`` (or a ``Capture``).
+
+    calibration : per-view aberration shift maps (``metasensor.depth.aberration``): an array
+        ``(nnum, nnum, 2, H, W)`` in view pixels (dy, dx), an object with ``.shift_maps(shape)``,
+        or a path to a system-aberration file. The views are warped by them first.
+    candidates, disparity_range : number and span of the plane-sweep disparities in view pixels
+        per view step (default span ``±scan/2``, :func:`geometry.default_disparity_range`).
+    view_mask : boolean ``(nnum, nnum)`` of the views to use (default ``cfg.view_mask()``); it must
+        contain the centre view. ``cost``: ``"variance"`` or ``"sad"``; ``occlusion``: half-pupil
+        occlusion handling. ``radius`` [view px] and ``eps`` (relative to the guide's variance) of
+        the guided cost aggregation. ``refine_iterations``: Gauss–Newton steps (0 = parabola fit
+        only). ``fill``: confidence-weighted edge-aware filling of weak pixels.
+    focal_length, focus_distance : main-lens geometry [m] overriding the config's.
+    """
+    if not isinstance(cfg, SystemConfig):
+        raise TypeError(f"cfg must be a SystemConfig, got {type(cfg).__name__}")
+    arr = _check_views(views, cfg)
+    n, c = cfg.nnum, cfg.center
+    h, w = arr.shape[2:]
+    mask = cfg.view_mask() if view_mask is None else np.asarray(view_mask, dtype=bool)
+    if mask.shape != (n, n):
+        raise ValueError(f"view_mask must have shape {(n, n)}, got {mask.shape}")
+    if not mask[c, c] or mask.sum() < 2:
+        raise ValueError("view_mask must contain the centre view and at least one other view")
+    rng_ = geometry.default_disparity_range(cfg) if disparity_range is None else disparity_range
+    cands = geometry.disparity_candidates(rng_, candidates)
+    lens = geometry.main_lens_geometry(cfg, focal_length, focus_distance)
+    shift_maps = resolve_shift_maps(calibration, n, (h, w))
+    dev = resolve_device(device)
+
+    uu, vv = np.nonzero(mask)
+    au, av = (uu - c).astype(np.float64), (vv - c).astype(np.float64)
+    sel = arr[uu, vv]
+    if not np.isfinite(sel).all():
+        raise ValueError("views contain NaN or infinite values")
+    with torch.no_grad():
+        stack = torch.tensor(sel, dtype=torch.float32, device=dev)
+        if shift_maps is not None:
+            stack = warp_views(stack, torch.tensor(shift_maps[uu, vv], device=dev))
+        if normalize:
+            means = stack.mean(dim=(1, 2), keepdim=True)
+            if bool((means <= 0).any()):
+                raise ValueError("a view inside the pupil has a non-positive mean; "
+                                 "pass normalize=False or a smaller view_mask")
+            stack = stack / means * means.mean()
+        centre = int(np.nonzero((uu == c) & (vv == c))[0][0])
+        guide = stack[centre]
+        gf = GuidedFilter(guide, radius=radius, eps=eps)
+        sweep = CostVolume(stack, au, av, centre, float(np.abs(cands).max()), cost=cost,
+                           occlusion=occlusion)
+        vol = sweep.volume(cands, aggregate=gf, progress=progress)
+        disp, idx = subpixel_minimum(vol, cands)
+        conf = peak_ratio_confidence(vol, idx)
+        del vol, sweep
+        if refine_iterations > 0:
+            disp = gauss_newton_refine(stack, au, av, disp, gf, iterations=refine_iterations,
+                                       max_change=float(cands[1] - cands[0]),
+                                       occlusion=occlusion)
+            disp = torch.clamp(disp, float(cands[0]), float(cands[-1]))
+        if fill:
+            disp = fill_low_confidence(disp, conf, guide, radius=3 * radius, eps=eps)
+        disparity = to_numpy(disp).astype(np.float32)
+        confidence = to_numpy(conf).astype(np.float32)
+    z = geometry.disparity_to_image_depth(disparity, cfg).astype(np.float32)
+    obj = None
+    if lens is not None:
+        obj = geometry.image_depth_to_object_distance(z, *lens).astype(np.float32)
+    return DepthResult(
+        disparity=disparity, confidence=confidence, image_depth=z, object_distance=obj,
+        depth=obj if obj is not None else z, depth_kind="object" if obj is not None else "image",
+        candidates=cands, config=cfg,
+    )

@@ -1,0 +1,43 @@
+"""View stacks on disk: TIFF page layout u*nnum+v, metadata round trip, Zarr, bad files."""
+
+import numpy as np
+import pytest
+import tifffile
+
+import metasensor as ms
+from metasensor.io.views import read_config_from_views, read_views, write_views
+
+
+def test_tiff_layout_and_config_round_trip(tmp_path):
+    cfg = ms.SystemConfig(nnum=5, scan=5)
+    views = np.arange(5 * 5 * 4 * 6, dtype=np.float32).reshape(5, 5, 4, 6)
+    path = write_views(tmp_path / "v.tif", views, cfg)
+    pages = tifffile.imread(path)
+    np.testing.assert_array_equal(pages[2 * 5 + 3], views[2, 3])  # page u*nnum + v
+    np.testing.assert_array_equal(read_views(path), views)
+    assert read_config_from_views(path) == cfg
+    assert not list(tmp_path.glob(".v.tif*"))  # no temporary left behind
+
+
+def test_zarr_round_trip(tmp_path):
+    cfg = ms.SystemConfig(nnum=3, scan=3)
+    views = np.random.default_rng(0).random((3, 3, 8, 8)).astype(np.float32)
+    path = write_views(tmp_path / "v.zarr", views, cfg)
+    np.testing.assert_array_equal(np.asarray(read_views(path)[:]), views)
+    assert read_config_from_views(path) == cfg
+
+
+def test_bad_inputs(tmp_path):
+    with pytest.raises(ValueError, match="nnum, nnum, H, W"):
+        write_views(tmp_path / "x.tif", np.zeros((3, 4, 5, 5)))
+    with pytest.raises(ValueError, match=r"\.tif"):
+        write_views(tmp_path / "x.png", np.zeros((3, 3, 5, 5)))
+    with pytest.raises(FileNotFoundError):
+        read_views(tmp_path / "missing.tif")
+    bad = tmp_path / "bad.tif"
+    bad.write_bytes(b"II*\x00garbage")
+    with pytest.raises(ValueError, match="not a readable TIFF"):
+        read_views(bad)
+    tifffile.imwrite(tmp_path / "five.tif", np.zeros((5, 4, 4), np.float32))
+    with pytest.raises(ValueError, match="not nnum"):
+        read_views(tmp_path / "five.tif", nnum=3)
