@@ -1,9 +1,197 @@
-"""Command-line commands of the sensor stage (registered on the main app by metasensor.cli)."""
+"""Command-line commands of the sensor stage: ``calibrate`` and ``realign``."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
+import numpy as np
 import typer
+
+_ORDERS = "row-major, serpentine, or an explicit list '0,0;0,1;...'"
+
+
+def _config(config: Path | None, scan: int | None):
+    from metasensor.config import SystemConfig
+
+    cfg = SystemConfig.from_toml(config) if config is not None else SystemConfig()
+    return cfg.replace(scan=scan) if scan is not None and scan != cfg.scan else cfg
+
+
+def _order(text: str | None, period: int):
+    from metasensor.sensor.scan import check_scan_order
+
+    if text is None or text in ("row-major", "serpentine", "rowmajor", "raster", "snake",
+                                "boustrophedon"):
+        return check_scan_order(text, period)
+    try:
+        pairs = [tuple(int(v) for v in item.split(",")) for item in text.split(";") if item]
+    except ValueError:
+        raise ValueError(f"--order must be {_ORDERS}; got {text!r}") from None
+    return check_scan_order(pairs, period)
+
+
+def _same_file(a: Path, b: Path) -> bool:
+    return a.exists() and b.exists() and a.resolve() == b.resolve()
+
+
+def calibrate_cmd(
+    white: Path = typer.Argument(..., help="white (flat-field) or textured raw frame(s), TIFF"),
+    out: Path = typer.Option(..., "--out", help="calibration file to write (.toml)"),
+    config: Path | None = typer.Option(None, "--config", help="system configuration TOML"),
+    scan: int | None = typer.Option(None, "--scan", help="scan period of a multi-page input"),
+    order: str | None = typer.Option(None, "--order", help=f"scan order: {_ORDERS}"),
+    moving: str = typer.Option("mla", "--moving", help="what moves during the scan: mla|image"),
+    flat: bool = typer.Option(True, "--flat/--no-flat", help="also write the flat-field map"),
+) -> None:
+    """Calibrate the lenslet grid (pitch, rotation, centre, flat field, scan offsets).
+
+    A one-page TIFF gives the grid; a TIFF with scan² pages (one scan period, in
+    --order) also gives each scan phase's actual offset, reported against nominal.
+
+    Example: metasensor calibrate white.tif --out calib.toml
+    """
+    from metasensor.io.atomic import atomic_path
+    from metasensor.io.raw import open_raw
+    from metasensor.sensor.calibrate import calibrate, flat_field
+
+    cfg = _config(config, scan)
+    with open_raw(white) as raw:
+        pages = len(raw)
+        period = cfg.scan if scan is not None else (int(round(pages**0.5)) if pages > 1 else 1)
+        phases = _order(order, period)
+        if pages not in (1, period * period):
+            raise ValueError(f"{white}: {pages} pages; expected 1 or one {period}x{period} scan "
+                             f"period ({period * period})")
+        frames = [raw[t] for t in range(pages)] if pages > 1 else None
+        ref = frames[phases.index((0, 0))] if frames is not None else raw[0]
+    calib = calibrate(ref, cfg.nnum, frames=frames, scan=period, scan_order=phases,
+                      moving=moving)
+    if flat:
+        import tifffile
+
+        flat_name = out.with_suffix(".flat.tif").name
+        with atomic_path(out.parent / flat_name) as tmp:
+            tifffile.imwrite(tmp, flat_field(ref, calib), metadata=None,
+                             description="metasensor flat field (rectified, phase 0,0)")
+        calib = calib.replace(flat=flat_name)
+    calib.to_toml(out)
+    typer.echo(f"pitch {calib.pitch:.4f} px, rotation {calib.rotation:+.4f} deg, centre "
+               f"({calib.center[0]:.3f}, {calib.center[1]:.3f}) px, {calib.lenslets[0]}x"
+               f"{calib.lenslets[1]} lenslets kept")
+    if calib.offsets is not None:
+        err = calib.offset_errors()
+        typer.echo("scan-phase offsets, measured - nominal [px]: " + ", ".join(
+            f"{ph}: ({e[0]:+.2f}, {e[1]:+.2f})" for ph, e in zip(calib.scan_order, err,
+                                                                  strict=True)))
+    typer.echo(f"-> {out}")
+
+
+def realign_cmd(
+    raw_path: Path = typer.Argument(..., metavar="RAW", help="raw frames, multi-page TIFF"),
+    out: Path = typer.Option(..., "--out", help="view stack(s) to write (.tif or .zarr)"),
+    calib_path: Path | None = typer.Option(None, "--calib", help="calibration TOML (none: "
+                                           "frames are already rectified)"),
+    config: Path | None = typer.Option(None, "--config", help="system configuration TOML"),
+    scan: int | None = typer.Option(None, "--scan", help="scan period (default: config's)"),
+    order: str | None = typer.Option(None, "--order", help=f"scan order: {_ORDERS}"),
+    moving: str = typer.Option("mla", "--moving", help="what moves during the scan: mla|image"),
+    offsets: str = typer.Option("measure", "--offsets", help="per-frame grid offsets: measure "
+                                "(from each frame), calib (stored), nominal"),
+    sliding: bool = typer.Option(False, "--sliding", help="one view stack per frame (a sliding "
+                                 "window of one scan period) instead of one per period"),
+    start_phase: int = typer.Option(0, "--start-phase", help="index in the order of frame 0"),
+    method: str = typer.Option("lanczos", "--method", help="interpolator: lanczos|spline|cubic"),
+    apply_flat: bool = typer.Option(False, "--flat", help="divide by the calibration's flat "
+                                    "field"),
+) -> None:
+    """Realign raw frames into view stacks (page u*nnum + v = view (u, v)).
+
+    Frames are streamed from the TIFF, rectified with the calibration (each frame on
+    its own measured grid offset) and realigned one scan period at a time (--sliding:
+    one stack per frame). Several stacks are written as OUT_00000.tif, OUT_00001.tif...
+
+    Example: metasensor realign raw.tif --calib calib.toml --scan 5 --out views.tif
+    """
+    from tqdm import tqdm
+
+    from metasensor.io.raw import open_raw
+    from metasensor.io.views import write_views
+    from metasensor.sensor.calibration import Calibration
+    from metasensor.sensor.realign import realign_sequence
+    from metasensor.sensor.rectify import check_fits, rectify_frames
+
+    if offsets not in ("measure", "calib", "nominal"):
+        raise ValueError(f"--offsets must be measure, calib or nominal, got {offsets!r}")
+    if out.suffix.lower() not in (".tif", ".tiff", ".zarr"):
+        raise ValueError(f"--out must end in .tif, .tiff or .zarr: {out}")
+    if _same_file(out, raw_path):
+        raise ValueError(f"--out {out} would overwrite the input")
+    cfg = _config(config, scan)
+    phases = _order(order, cfg.scan)
+    tp = len(phases)
+    calib = Calibration.from_toml(calib_path) if calib_path is not None else None
+    with open_raw(raw_path) as raw:
+        n_frames = len(raw)
+        if n_frames < tp:
+            raise ValueError(f"{raw_path}: {n_frames} frames but one {cfg.scan}x{cfg.scan} scan "
+                             f"period needs {tp}")
+        if not sliding and n_frames % tp:
+            raise ValueError(f"{raw_path}: frame count {n_frames} is not a multiple of the "
+                             f"{cfg.scan}x{cfg.scan} scan ({tp}); use --sliding for a window")
+        stream = tqdm(raw, total=n_frames, desc="realign", unit="frame")
+        if calib is not None:
+            from metasensor.sensor.calibrate import adapt
+
+            check_fits(calib, raw.shape[1:], cfg.nnum)
+            calib = adapt(calib, cfg.scan, phases, moving)
+            off = offsets if offsets != "calib" else None
+            if offsets == "measure" and moving == "mla":
+                from metasensor.sensor.calibrate import frame_offset
+
+                def off(f, frame, phase):
+                    return frame_offset(frame, calib, phase)
+            elif offsets == "measure":
+                off = "nominal"
+            stream = rectify_frames(stream, calib, phases, offsets=off,
+                                    start_phase=start_phase, method=method)
+        flat = None
+        if apply_flat:
+            flat = _flat(calib, calib_path, cfg)
+        n_out = n_frames - tp + 1 if sliding else n_frames // tp
+        meta = {"scan_order": [list(p) for p in phases], "moving": moving,
+                "source": str(raw_path), "sliding": sliding}
+        written = []
+        for k, views in enumerate(realign_sequence(stream, cfg, phases, moving,
+                                                   sliding=sliding, start_phase=start_phase)):
+            if flat is not None:
+                views = np.where(flat > 0.05, views / np.maximum(flat, 0.05), 0).astype(
+                    np.float32)
+            path = out if n_out == 1 else out.with_name(f"{out.stem}_{k:05d}{out.suffix}")
+            write_views(path, views, cfg, extra={**meta, "window": k})
+            written.append(path)
+    typer.echo(f"-> {written[0]}" + (f" ... {written[-1]} ({len(written)} stacks)"
+                                     if len(written) > 1 else ""))
+
+
+def _flat(calib, calib_path, cfg):
+    import tifffile
+
+    from metasensor.sensor.rectify import flat_views
+
+    if calib is None or calib.flat is None:
+        raise ValueError("--flat needs a calibration with a flat-field map (--calib)")
+    path = calib.flat_path(calib_path)
+    if not path.is_file():
+        raise FileNotFoundError(f"flat-field map not found: {path}")
+    flat = tifffile.imread(path)
+    n = cfg.nnum
+    (i0, j0), (ly, lx) = calib.flat_origin, calib.lenslets
+    if i0 < 0 or j0 < 0 or (i0 + ly) * n > flat.shape[0] or (j0 + lx) * n > flat.shape[1]:
+        raise ValueError(f"flat-field map {path} does not cover the lenslets kept for this scan")
+    return flat_views(flat[i0 * n:(i0 + ly) * n, j0 * n:(j0 + lx) * n], n, cfg.scan)
 
 
 def register(app: typer.Typer) -> None:
     """Add this stage's commands to app."""
+    app.command("calibrate")(calibrate_cmd)
+    app.command("realign")(realign_cmd)

@@ -4,18 +4,25 @@
 behind lenslet (ly, lx) sits at sensor rows ``ly*nnum + r*d``, columns ``lx*nnum + c*d``
 (d = nnum // period). ``moving="image"``: the blocks stay at ``ly*nnum, lx*nnum``.
 Either way view (u, v) at sample ``(ly*period + r, lx*period + c)`` is pixel (u, v) of that block.
+Frames must already be rectified (:mod:`metasensor.sensor.rectify`): lenslet (0, 0) of phase
+(0, 0) covers pixels ``[0:nnum, 0:nnum]``.
 """
 
 from __future__ import annotations
 
+from collections.abc import Iterable, Iterator
+
 import numpy as np
 
 from metasensor.config import SystemConfig
+from metasensor.sensor.gather import gather_views
 from metasensor.sensor.scan import check_scan_order
 
-__all__ = ["realign", "unrealign", "lenslet_counts"]
+__all__ = ["realign", "unrealign", "lenslet_counts", "realign_sequence", "phase_offsets"]
 
 _MOVING = ("mla", "image")
+_DTYPES = {np.dtype(t) for t in ("uint8", "uint16", "uint32", "int8", "int16", "int32", "int64",
+                                 "uint64", "float32", "float64")}
 
 
 def _geometry(cfg: SystemConfig, moving: str) -> tuple[int, int, int]:
@@ -27,6 +34,13 @@ def _geometry(cfg: SystemConfig, moving: str) -> tuple[int, int, int]:
     return p, d, margin
 
 
+def phase_offsets(order, cfg: SystemConfig, moving: str = "mla") -> list[tuple[int, int]]:
+    """Nominal block origin (rows, columns) in rectified pixels of every phase of ``order``."""
+    p, d, _ = _geometry(cfg, moving)
+    order = check_scan_order(order, p)
+    return [(r * d, c * d) if moving == "mla" else (0, 0) for r, c in order]
+
+
 def lenslet_counts(frame_shape: tuple[int, int], cfg: SystemConfig, moving: str = "mla"
                    ) -> tuple[int, int]:
     """Lenslets (Ly, Lx) whose blocks are on the sensor at every scan phase."""
@@ -36,46 +50,95 @@ def lenslet_counts(frame_shape: tuple[int, int], cfg: SystemConfig, moving: str 
     return ly, lx
 
 
+def _check_dtype(dtype: np.dtype, what: str = "frames") -> None:
+    if np.dtype(dtype) not in _DTYPES:
+        raise TypeError(f"{what} must be an integer or float32/float64 array, got dtype {dtype}")
+
+
+def _check_finite(frames: np.ndarray, what: str = "frames") -> None:
+    if frames.dtype.kind != "f":
+        return
+    flat = frames.reshape(frames.shape[0], -1) if frames.ndim > 1 else frames[None]
+    step = max(1, (1 << 24) // max(1, flat.shape[1]))
+    for t0 in range(0, flat.shape[0], step):  # chunked: no full-size temporary
+        if not np.isfinite(flat[t0:t0 + step]).all():
+            raise ValueError(f"{what} contain NaN or infinite values")
+
+
 def _check_frames(frames, cfg: SystemConfig, period: int, margin: int) -> np.ndarray:
     if not isinstance(frames, np.ndarray):
         frames = np.asarray(frames)
     if frames.ndim != 3:
         raise ValueError(f"frames must be a (T, H, W) array, got shape {frames.shape}")
-    if frames.dtype.kind not in "uif" or frames.dtype == np.float16:
-        raise TypeError(f"frames must be an integer or float32/64 array, got dtype {frames.dtype}")
+    _check_dtype(frames.dtype)
     t = frames.shape[0]
     if t != period * period:
         raise ValueError(
             f"got {t} frames but one {period}x{period} scan period needs {period * period}"
         )
+    _check_size(frames.shape[1:], cfg, margin)
+    _check_finite(frames)
+    return np.asarray(frames)  # a plain ndarray view of memmaps
+
+
+def _check_size(shape: tuple[int, ...], cfg: SystemConfig, margin: int) -> None:
     need = cfg.nnum + margin
-    if frames.shape[1] < need or frames.shape[2] < need:
+    if shape[0] < need or shape[1] < need:
         raise ValueError(
-            f"frames of {frames.shape[1]}x{frames.shape[2]} px are smaller than one lenslet "
+            f"frames of {shape[0]}x{shape[1]} px are smaller than one lenslet "
             f"block over the scan ({need}x{need} px)"
         )
-    if frames.dtype.kind == "f" and not np.isfinite(frames).all():
-        raise ValueError("frames contain NaN or infinite values")
-    return frames
 
 
-def realign(frames, cfg: SystemConfig, scan_order=None, moving: str = "mla") -> np.ndarray:
+def realign(frames, cfg: SystemConfig, scan_order=None, moving: str = "mla", *,
+            out: np.ndarray | None = None, engine: str = "auto") -> np.ndarray:
     """Raw frames ``(T, H, W)`` of one scan period → views ``(nnum, nnum, Ly*p, Lx*p)``.
 
-    ``T = cfg.scan**2`` frames in ``scan_order`` (None: row-major). The output keeps the frames'
-    dtype, so integer data are realigned exactly. The input is never modified.
+    ``T = cfg.scan**2`` rectified frames in ``scan_order`` (None: row-major; a preset name or a
+    list of (row, col) phases). The output keeps the frames' dtype, so integer data are
+    realigned exactly. ``out``: optional preallocated C-contiguous output of that shape and
+    dtype. ``engine``: ``"auto"`` (compiled gather for large data), ``"numba"`` or ``"numpy"``.
+    The input is never modified. A torch tensor (e.g. on CUDA) is realigned on its device and
+    a new tensor is returned.
     """
-    p, d, margin = _geometry(cfg, moving)
+    p, _, margin = _geometry(cfg, moving)
     order = check_scan_order(scan_order, p)
+    if type(frames).__module__.startswith("torch"):
+        return _realign_torch(frames, cfg, order, moving, margin)
     frames = _check_frames(frames, cfg, p, margin)
     n = cfg.nnum
     ly, lx = lenslet_counts(frames.shape[1:], cfg, moving)
-    views = np.empty((n, n, ly * p, lx * p), dtype=frames.dtype)
-    for t, (r, c) in enumerate(order):
-        oy, ox = (r * d, c * d) if moving == "mla" else (0, 0)
-        block = frames[t, oy:oy + ly * n, ox:ox + lx * n].reshape(ly, n, lx, n)
-        views[:, :, r::p, c::p] = block.transpose(1, 3, 0, 2)
-    return views
+    shape = (n, n, ly * p, lx * p)
+    if out is None:
+        out = np.empty(shape, dtype=frames.dtype)
+    elif (out.shape != shape or out.dtype != frames.dtype
+          or not out.flags.c_contiguous or not out.flags.writeable):
+        raise ValueError(f"out must be a writeable C-contiguous {frames.dtype} array of shape "
+                         f"{shape}, got {out.dtype} {out.shape}")
+    return gather_views(frames, out, order, phase_offsets(order, cfg, moving), n, p, ly, lx,
+                        engine=engine)
+
+
+def _realign_torch(frames, cfg: SystemConfig, order, moving: str, margin: int):
+    import torch
+
+    from metasensor.sensor.gather import gather_views_torch
+
+    p = cfg.scan
+    if frames.ndim != 3:
+        raise ValueError(f"frames must be a (T, H, W) tensor, got shape {tuple(frames.shape)}")
+    if frames.dtype in (torch.bool, torch.float16, torch.bfloat16) or frames.is_complex():
+        raise TypeError(f"frames must be an integer or float32/float64 tensor, got dtype "
+                        f"{frames.dtype}")
+    if frames.shape[0] != p * p:
+        raise ValueError(f"got {frames.shape[0]} frames but one {p}x{p} scan period needs "
+                         f"{p * p}")
+    _check_size(tuple(frames.shape[1:]), cfg, margin)
+    if frames.is_floating_point() and not bool(torch.isfinite(frames).all()):
+        raise ValueError("frames contain NaN or infinite values")
+    ly, lx = lenslet_counts(tuple(frames.shape[1:]), cfg, moving)
+    return gather_views_torch(frames, order, phase_offsets(order, cfg, moving), cfg.nnum, p,
+                              ly, lx)
 
 
 def unrealign(views, cfg: SystemConfig, scan_order=None, moving: str = "mla",
@@ -91,16 +154,63 @@ def unrealign(views, cfg: SystemConfig, scan_order=None, moving: str = "mla",
     n = cfg.nnum
     if views.ndim != 4 or views.shape[:2] != (n, n):
         raise ValueError(f"views must have shape ({n}, {n}, H, W), got {views.shape}")
-    if views.shape[2] % p or views.shape[3] % p:
+    if views.shape[2] % p or views.shape[3] % p or views.shape[2] == 0 or views.shape[3] == 0:
         raise ValueError(f"view size {views.shape[2:]} is not a multiple of the scan period {p}")
     ly, lx = views.shape[2] // p, views.shape[3] // p
     if frame_shape is None:
         frame_shape = (ly * n + margin, lx * n + margin)
-    if frame_shape[0] < ly * n + margin or frame_shape[1] < lx * n + margin:
+    frame_shape = tuple(int(s) for s in frame_shape)
+    if len(frame_shape) != 2 or frame_shape[0] < ly * n + margin or \
+            frame_shape[1] < lx * n + margin:
         raise ValueError(f"frame_shape {frame_shape} cannot hold {ly}x{lx} lenslets over the scan")
     frames = np.zeros((p * p, *frame_shape), dtype=views.dtype)
-    for t, (r, c) in enumerate(order):
-        oy, ox = (r * d, c * d) if moving == "mla" else (0, 0)
+    for t, (oy, ox) in enumerate(phase_offsets(order, cfg, moving)):
+        r, c = order[t]
         block = views[:, :, r::p, c::p].transpose(2, 0, 3, 1).reshape(ly * n, lx * n)
         frames[t, oy:oy + ly * n, ox:ox + lx * n] = block
     return frames
+
+
+def realign_sequence(frames: Iterable[np.ndarray], cfg: SystemConfig, scan_order=None,
+                     moving: str = "mla", *, sliding: bool = True, start_phase: int = 0,
+                     engine: str = "auto") -> Iterator[np.ndarray]:
+    """Realign a long sequence of rectified frames ``(H, W)`` (any iterable: an array, a list,
+    a :class:`metasensor.io.raw.RawFrames` stream), yielding view stacks.
+
+    Frame ``f`` has scan phase ``order[(f + start_phase) % T]`` (T = period²: the scan repeats).
+    ``sliding=True`` (the paper's way to keep the frame rate): window ``t`` uses frames
+    ``t .. t+T-1`` and one view stack is yielded per frame from frame ``T-1`` on (N - T + 1
+    stacks for N frames). ``sliding=False``: one stack per complete period (N must then be a
+    multiple of T). Only the last T frames are held in memory (a ring buffer in which slot s
+    always holds the latest frame of phase ``order[s]``). Each yielded array is new.
+    """
+    p, _, margin = _geometry(cfg, moving)
+    order = check_scan_order(scan_order, p)
+    tp = p * p
+    if not isinstance(start_phase, (int, np.integer)) or not 0 <= start_phase < tp:
+        raise ValueError(f"start_phase must be an integer in 0..{tp - 1}, got {start_phase!r}")
+    offsets = phase_offsets(order, cfg, moving)
+    ring: np.ndarray | None = None
+    count = 0
+    for f, frame in enumerate(frames):
+        frame = np.asarray(frame)
+        if frame.ndim != 2:
+            raise ValueError(f"frame {f} must be a 2-D (H, W) array, got shape {frame.shape}")
+        if ring is None:
+            _check_dtype(frame.dtype, f"frame {f}")
+            _check_size(frame.shape, cfg, margin)
+            ring = np.empty((tp, *frame.shape), dtype=frame.dtype)
+        elif frame.shape != ring.shape[1:] or frame.dtype != ring.dtype:
+            raise ValueError(f"frame {f} is {frame.dtype} {frame.shape}, unlike the first frame "
+                             f"({ring.dtype} {ring.shape[1:]})")
+        _check_finite(frame[None], f"frame {f}")
+        ring[(f + start_phase) % tp] = frame
+        count = f + 1
+        if count >= tp and (sliding or count % tp == 0):
+            ly, lx = lenslet_counts(ring.shape[1:], cfg, moving)
+            out = np.empty((cfg.nnum, cfg.nnum, ly * p, lx * p), dtype=ring.dtype)
+            yield gather_views(ring, out, order, offsets, cfg.nnum, p, ly, lx, engine=engine)
+    if count < tp:
+        raise ValueError(f"got {count} frames but one {p}x{p} scan period needs {tp}")
+    if not sliding and count % tp:
+        raise ValueError(f"frame count {count} is not a multiple of the {p}x{p} scan ({tp})")

@@ -1,0 +1,183 @@
+"""Raw frame streams: multi-page TIFF read one frame at a time (never the whole sequence).
+
+Uncompressed contiguous files are memory-mapped (read-only); others are decoded page by page
+with tifffile. A truncated file (a page whose data run past the end of the file) is reported at
+open time as one clear line. The file is opened read-only and never modified.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["RawFrames", "open_raw", "write_raw"]
+
+
+class _TiffWarnings(logging.Handler):
+    """Collect tifffile's logged warnings (it logs, not raises, on a broken page chain)."""
+
+    def __init__(self) -> None:
+        super().__init__(logging.WARNING)
+        self.messages: list[str] = []
+
+    def emit(self, record: logging.LogRecord) -> None:
+        self.messages.append(record.getMessage())
+
+    def __enter__(self) -> _TiffWarnings:
+        self._logger = logging.getLogger("tifffile")
+        self._propagate = self._logger.propagate
+        self._logger.addHandler(self)
+        self._logger.propagate = False
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self._logger.removeHandler(self)
+        self._logger.propagate = self._propagate
+
+
+class RawFrames:
+    """A read-only sequence of 2-D frames from a multi-page TIFF (or a ``(T, H, W)`` array).
+
+    ``len(raw)``, ``raw.shape`` ``(T, H, W)``, ``raw.dtype``, ``raw[t]`` → a new ``(H, W)``
+    array, iteration in page order, ``raw.read(t0, t1)`` → ``(t1-t0, H, W)``. Use as a context
+    manager (or call :meth:`close`) to release the file.
+    """
+
+    def __init__(self, source, *, mmap: bool = True) -> None:
+        self.path: Path | None = None
+        self._tif = None
+        self._mm: np.ndarray | None = None
+        if isinstance(source, np.ndarray):
+            if source.ndim == 2:
+                source = source[None]
+            if source.ndim != 3:
+                raise ValueError(f"raw frames must be (T, H, W), got shape {source.shape}")
+            self._mm = source
+            self.shape = tuple(int(s) for s in source.shape)
+            self.dtype = source.dtype
+            return
+        self.path = Path(source)
+        self._open(mmap)
+
+    def _open(self, mmap: bool) -> None:
+        import tifffile
+
+        path = self.path
+        if not path.is_file():
+            raise FileNotFoundError(f"raw frames not found: {path}")
+        size = os.path.getsize(path)
+        try:
+            tif = tifffile.TiffFile(path, mode="rb")
+        except Exception as exc:  # tifffile raises many types for corrupt files
+            raise ValueError(f"{path}: not a readable TIFF ({type(exc).__name__}: {exc})") from None
+        self._tif = tif
+        try:
+            with _TiffWarnings() as warned:
+                pages = list(tif.pages)
+            if warned.messages:
+                raise ValueError(f"{path}: truncated or corrupt TIFF after page {len(pages)} "
+                                 f"({warned.messages[0]})")
+            if not pages:
+                raise ValueError(f"{path}: TIFF has no pages")
+            first = pages[0]
+            shape = tuple(first.shape)
+            if len(shape) != 2:
+                raise ValueError(f"{path}: frames must be 2-D greyscale pages, got {shape}")
+            for k, page in enumerate(pages):
+                if tuple(page.shape) != shape or page.dtype != first.dtype:
+                    raise ValueError(f"{path}: page {k} is {page.dtype} {page.shape}, unlike "
+                                     f"page 0 ({first.dtype} {shape})")
+                offsets, counts = page.dataoffsets, page.databytecounts
+                if not offsets or max(o + c for o, c in zip(offsets, counts, strict=True)) > size:
+                    raise ValueError(f"{path}: truncated TIFF (page {k} of {len(pages)} runs past "
+                                     f"the end of the {size}-byte file)")
+        except ValueError:
+            self.close()
+            raise
+        except Exception as exc:
+            self.close()
+            raise ValueError(f"{path}: corrupt TIFF ({type(exc).__name__}: {exc})") from None
+        self._pages = pages
+        self.shape = (len(pages), *shape)
+        self.dtype = np.dtype(first.dtype)
+        if mmap and tif.series and tif.series[0].dataoffset is not None \
+                and tuple(tif.series[0].shape) in (self.shape, self.shape[1:]):
+            try:
+                mm = tifffile.memmap(path, mode="r")
+                self._mm = mm.reshape(self.shape)
+            except Exception:  # fall back to page-by-page decoding
+                self._mm = None
+
+    # ---------------------------------------------------------------- sequence protocol
+    def __len__(self) -> int:
+        return self.shape[0]
+
+    def __getitem__(self, t: int) -> np.ndarray:
+        t = int(t)
+        if t < 0:
+            t += len(self)
+        if not 0 <= t < len(self):
+            raise IndexError(f"frame {t} out of range 0..{len(self) - 1}")
+        if self._mm is not None:
+            return np.array(self._mm[t])
+        try:
+            frame = self._pages[t].asarray()
+        except Exception as exc:
+            raise ValueError(f"{self.path}: cannot decode page {t} ({exc})") from None
+        return np.asarray(frame)
+
+    def __iter__(self) -> Iterator[np.ndarray]:
+        for t in range(len(self)):
+            yield self[t]
+
+    def read(self, t0: int = 0, t1: int | None = None) -> np.ndarray:
+        """Frames ``t0 .. t1-1`` as one new ``(t1-t0, H, W)`` array."""
+        t1 = len(self) if t1 is None else t1
+        if not 0 <= t0 <= t1 <= len(self):
+            raise IndexError(f"frame range {t0}..{t1} out of 0..{len(self)}")
+        out = np.empty((t1 - t0, *self.shape[1:]), dtype=self.dtype)
+        for k in range(t0, t1):
+            out[k - t0] = self[k] if self._mm is None else self._mm[k]
+        return out
+
+    def close(self) -> None:
+        self._mm = None
+        if self._tif is not None:
+            self._tif.close()
+            self._tif = None
+
+    def __enter__(self) -> RawFrames:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def __repr__(self) -> str:
+        return f"RawFrames({self.path or 'array'}, shape={self.shape}, dtype={self.dtype})"
+
+
+def open_raw(source, *, mmap: bool = True) -> RawFrames:
+    """Open raw frames (a multi-page TIFF path or an array) for streaming."""
+    return RawFrames(source, mmap=mmap)
+
+
+def write_raw(path: str | Path, frames: np.ndarray, description: str | None = None) -> Path:
+    """Write frames ``(T, H, W)`` as an uncompressed multi-page TIFF, atomically."""
+    import tifffile
+
+    from metasensor.io.atomic import atomic_path
+
+    frames = np.asarray(frames)
+    if frames.ndim == 2:
+        frames = frames[None]
+    if frames.ndim != 3:
+        raise ValueError(f"raw frames must be (T, H, W), got shape {frames.shape}")
+    with atomic_path(path) as tmp:
+        tifffile.imwrite(tmp, frames, description=description, metadata=None,
+                         photometric="minisblack",
+                         bigtiff=frames.nbytes > 2**31 - 2**25)
+    return Path(path)

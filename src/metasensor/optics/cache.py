@@ -1,0 +1,108 @@
+"""On-disk cache of PSF banks, keyed by a SHA-256 of everything a bank depends on.
+
+Location: the environment variable ``METASENSOR_CACHE`` if set, else the folder given to
+:func:`set_cache_dir`, else ``~/.cache/metasensor``. Entries are ``.npy`` files written to a
+temporary name in the same folder and renamed with ``os.replace`` (atomic), so concurrent
+writers and readers never see a partial file; a corrupt entry counts as a miss and is removed.
+``stats`` counts hits and misses in this process (for tests and benchmarks).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import os
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["cache_dir", "set_cache_dir", "cache_key", "load", "store", "stats", "clear"]
+
+_setting: Path | None = None
+stats = {"hits": 0, "misses": 0}
+
+
+def set_cache_dir(path: str | Path | None) -> None:
+    """Set the cache folder for this process (``None``: back to the default).
+
+    ``METASENSOR_CACHE`` in the environment still takes precedence.
+    """
+    global _setting
+    _setting = None if path is None else Path(path).expanduser()
+
+
+def cache_dir() -> Path:
+    """The cache folder in effect (not created here)."""
+    env = os.environ.get("METASENSOR_CACHE")
+    if env:
+        return Path(env).expanduser()
+    if _setting is not None:
+        return _setting
+    return Path.home() / ".cache" / "metasensor"
+
+
+def cache_key(*parts) -> str:
+    """SHA-256 hex digest of the parts (bytes, str, numbers, NumPy arrays, None)."""
+    h = hashlib.sha256()
+    for part in parts:
+        if isinstance(part, np.ndarray):
+            arr = np.ascontiguousarray(part)
+            h.update(f"nd{arr.dtype.str}{arr.shape}".encode())
+            h.update(arr.tobytes())
+        elif isinstance(part, bytes):
+            h.update(b"b" + part)
+        else:
+            h.update(repr(part).encode())
+        h.update(b"|")
+    return h.hexdigest()
+
+
+def _path(key: str, folder: Path | None) -> Path:
+    return (folder or cache_dir()) / "psf" / f"{key}.npy"
+
+
+def load(key: str, folder: Path | None = None) -> np.ndarray | None:
+    """The cached array for ``key``, or ``None`` (a miss). Counts in :data:`stats`."""
+    path = _path(key, folder)
+    if path.is_file():
+        try:
+            arr = np.load(path, allow_pickle=False)
+        except (OSError, ValueError):
+            with contextlib.suppress(OSError):
+                path.unlink()
+        else:
+            stats["hits"] += 1
+            return arr
+    stats["misses"] += 1
+    return None
+
+
+def store(key: str, array: np.ndarray, folder: Path | None = None) -> Path | None:
+    """Write ``array`` under ``key`` atomically; returns the path (``None`` if not writable)."""
+    path = _path(key, folder)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(prefix=f".{key}.", suffix=".npy", dir=path.parent)
+    except OSError:
+        return None  # an unwritable cache never breaks the computation
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            np.save(fh, np.ascontiguousarray(array), allow_pickle=False)
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)
+        raise
+    return path
+
+
+def clear(folder: Path | None = None) -> int:
+    """Remove every cached PSF bank; returns how many files were removed."""
+    root = (folder or cache_dir()) / "psf"
+    count = 0
+    for f in root.glob("*.npy") if root.is_dir() else []:
+        with contextlib.suppress(OSError):
+            f.unlink()
+            count += 1
+    return count

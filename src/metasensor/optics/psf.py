@@ -1,0 +1,339 @@
+"""Wave-optics PSFs: the coded-MLA phase-space PSF bank and the conventional widefield PSF.
+
+Hand-written (system.md §3, docs/conventions.md): no library models a microlens-array sensor.
+
+Model of :func:`view_psfs`, for every point position s inside the central lenslet:
+pupil ``P(rho) = A exp(i 2π W)`` -> coherent field at the MLA ``U0(r) = ∫P exp(−i2π(NA/λ)rho·r)``
+(forward transform, so a Noll-2 tilt of c waves moves it by +2cλ/NA along +x; computed once, by
+a matrix Fourier transform, :mod:`metasensor.optics.coherent`) -> the point at s is an integer
+roll of ``U0`` (grid pitch ``dx = pixel_pitch / oversample``) -> times the lenslet array
+(aperture of ``cfg.lenslet_diameter``, quadratic phase ``exp(-iπ|r - c_m|²/(λ f_ml))``) ->
+angular-spectrum propagation over ``mla_focal`` (FFT) -> ``|.|²`` -> integrate over the sensor
+pixels (sum ``oversample²`` samples) -> regroup pixel (u, v) of lenslet block m into view (u, v)
+at displacement ``m·nnum − s``.
+
+The simulation grid holds an odd number L of whole lenslets per axis (periodic with the lenslet
+array, symmetric about the central lenslet's centre): enough for the largest ray displacement
+``(λ/NA) max|∇W|`` plus a diffraction margin of 12 λ/NA (the Airy pattern holds 99.2 % of its
+energy inside that radius), plus one guard lenslet per side, and at least
+``mla_focal·λ/dx²`` samples (angular-spectrum sampling condition). Point positions are batched
+on torch (CPU or CUDA, same code).
+
+Normalisation (photons): a unit point source fills the pupil; ``sum |U0|² = sum A² / sum A0²``
+over the plane, A0 the clear disk (1 for the clear pupil, ``1 − obstruction²`` for an annulus).
+``H[u, v, y, x]`` is the fraction of the point's photons reaching pixel (u, v) of the lenslet
+displaced by (y, x) from the point, so ``sum H ≈ nnum² × (area fraction of a lenslet passed by
+its aperture)``, less the light outside the window.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from collections.abc import Callable
+
+import numpy as np
+import torch
+
+from metasensor.backend import resolve_device
+from metasensor.config import SystemConfig
+from metasensor.optics import cache as _cache
+from metasensor.optics.coherent import point_field, pupil_radius_samples, pupil_samples
+from metasensor.optics.pupil import disk_fraction, pupil_phase
+
+__all__ = ["view_psfs", "widefield_psf", "PSF_CODE_VERSION", "ENERGY_CUT"]
+
+PSF_CODE_VERSION = "psf-1"
+ENERGY_CUT = 0.005  # default windows keep >= 99.5 % of the energy
+TAIL_LAMBDA_NA = 12.0  # diffraction margin (in λ/NA) around the geometric ray bundle
+
+PupilFn = Callable[[np.ndarray, np.ndarray], np.ndarray]
+
+
+# ----------------------------------------------------------------------------- checks
+def _check_zernike(zernike) -> np.ndarray | None:
+    if zernike is None:
+        return None
+    z = np.asarray(zernike, dtype=np.float64)
+    if z.ndim != 1 or z.size == 0:
+        raise ValueError(f"zernike must be a 1-D Noll coefficient vector, got shape {z.shape}")
+    if not np.isfinite(z).all():
+        raise ValueError("zernike contains NaN or infinite values")
+    return z
+
+
+def _check_odd(value, name: str) -> int | None:
+    if value is None:
+        return None
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1 \
+            or value % 2 == 0:
+        raise ValueError(f"{name} must be a positive odd integer, got {value!r}")
+    return int(value)
+
+
+def _check_depth(depth) -> float:
+    if isinstance(depth, bool) or not isinstance(depth, (int, float, np.floating)) \
+            or not math.isfinite(depth):
+        raise ValueError(f"depth must be a finite number of metres, got {depth!r}")
+    return float(depth)
+
+
+# ----------------------------------------------------------------------------- helpers
+def _grad_max(cfg: SystemConfig, zernike, depth: float, phase: PupilFn | None) -> float:
+    """max over the pupil of |∇W| in waves per unit rho (numerical gradient, 257² grid)."""
+    if zernike is None and depth == 0 and phase is None:
+        return 0.0
+    n = 257
+    t = np.linspace(-1.02, 1.02, n)
+    rx, ry = np.meshgrid(t, t, indexing="xy")
+    w = pupil_phase(cfg, rx, ry, zernike, depth, phase)
+    gy, gx = np.gradient(w, t[1] - t[0])
+    inside = rx**2 + ry**2 <= 1.0
+    return float(np.nanmax(np.hypot(gx, gy)[inside]))
+
+
+def _ray_reach(cfg: SystemConfig, grad_max: float) -> float:
+    """Largest ray displacement at the MLA, (λ/NA) max |∇W| [m] (conventions.md)."""
+    return cfg.wavelength / cfg.na * grad_max
+
+
+def _lenslet_tile(cfg: SystemConfig, oversample: int) -> np.ndarray:
+    """Complex transmission of one lenslet cell, (nnum·os, nnum·os), centred on its middle."""
+    m = cfg.nnum * oversample
+    dx = cfg.pixel_pitch / oversample
+    r = (np.arange(m) - m // 2) * dx
+    x, y = np.meshgrid(r, r, indexing="xy")
+    half = cfg.lenslet_diameter / 2
+    if cfg.lenslet_aperture == "circular":
+        frac = disk_fraction(x / half, y / half, dx / half)
+    else:
+        q = (np.arange(8) + 0.5) / 8 - 0.5
+        fx = np.mean([(np.abs(r + d * dx) <= half) for d in q], axis=0)
+        frac = fx[None, :] * fx[:, None]
+    quad = np.exp(-1j * np.pi * (x**2 + y**2) / (cfg.wavelength * cfg.mla_focal))
+    return np.sqrt(frac) * quad
+
+
+def _transfer(n: int, dx: float, z: float, wavelength: float) -> np.ndarray:
+    """Angular-spectrum (Rayleigh–Sommerfeld) transfer function in FFT order, piston removed."""
+    f = np.fft.fftfreq(n, dx)
+    f2 = f[None, :] ** 2 + f[:, None] ** 2
+    kz = np.sqrt(np.clip(1.0 / wavelength**2 - f2, 0.0, None))
+    h = np.exp(2j * np.pi * z * (kz - 1.0 / wavelength))
+    h[f2 >= 1.0 / wavelength**2] = 0.0  # evanescent
+    return h
+
+
+def _window_size(energy: np.ndarray, step: int, kmax: int,
+                 total: float | None = None) -> tuple[int, float]:
+    """Smallest odd K (<= kmax, in units of ``step`` samples) whose centred K·step window keeps
+    >= 1 − ENERGY_CUT of ``total`` (default: the whole map); returns (K, kept fraction)."""
+    n = energy.shape[0]
+    c = n // 2
+    cs = np.zeros((n + 1, n + 1))
+    cs[1:, 1:] = np.cumsum(np.cumsum(energy, 0), 1)
+    if total is None:
+        total = cs[-1, -1]
+    for k in range(1, kmax + 1, 2):
+        h = (k * step) // 2
+        lo, hi = c - h, c + h + 1
+        kept = cs[hi, hi] - cs[lo, hi] - cs[hi, lo] + cs[lo, lo]
+        if kept >= (1 - ENERGY_CUT) * total:
+            return k, float(kept / total)
+    h = (kmax * step) // 2
+    kept = cs[c + h + 1, c + h + 1] - cs[c - h, c + h + 1] - cs[c + h + 1, c - h] + cs[c - h, c - h]
+    return kmax, float(kept / total)
+
+
+def _crop(arr: np.ndarray, k: int) -> np.ndarray:
+    c = arr.shape[-1] // 2
+    h = k // 2
+    return arr[..., c - h:c + h + 1, c - h:c + h + 1]
+
+
+def _default_oversample(cfg: SystemConfig, subsample: int) -> int:
+    """Odd multiple of subsample, >= 3, sampling the field behind the lenslets at Nyquist/0.9."""
+    band = (cfg.na + cfg.lenslet_diameter / (2 * cfg.mla_focal)) / cfg.wavelength
+    dx_max = 0.9 / (2 * band)
+    os_ = subsample * math.ceil(3 / subsample)
+    if os_ % 2 == 0:
+        os_ += subsample
+    while cfg.pixel_pitch / os_ > dx_max:
+        os_ += 2 * subsample
+    return os_
+
+
+# ----------------------------------------------------------------------------- view PSFs
+def view_psfs(cfg: SystemConfig, zernike=None, depth: float = 0.0, *,
+              phase: PupilFn | None = None, amplitude=None, subsample: int = 1,
+              size: int | None = None, device=None, cache=True,
+              oversample: int | None = None) -> np.ndarray:
+    """Phase-space PSF bank ``H[u, v, y, x]`` of every view, float32
+    ``(nnum, nnum, K·subsample, K·subsample)``.
+
+    Parameters
+    ----------
+    cfg : the system.
+    zernike : Noll coefficient vector in waves (``z[j-1]`` = mode j), or None.
+    depth : defocus of the point on the image side [m]; > 0 focused in front of the MLA.
+    phase : optional ``f(rho_x, rho_y) -> waves`` added to the Zernike wavefront.
+    amplitude : pupil amplitude: None (clear circle, annulus if ``cfg.obstruction``), an
+        ``(nnum, nnum)`` map in view coordinates (nearest view), or ``f(rho_x, rho_y)``.
+    subsample : odd; point positions every ``pixel_pitch / subsample``, output sampled at that
+        pitch (the sensor pixels are still whole pixels). Centre index ``(K·subsample)//2`` is
+        zero displacement. Normalisation: each fine point carries ``1/subsample²`` of a pixel's
+        flux, ``H_sub = (photons per unit point) / subsample²``; hence the sub-lattice aligned
+        with the pixel grid, ``H_sub[..., c::s, c::s] * s²`` (c = (K·s)//2 % s), equals the
+        subsample=1 bank and ``H_sub.sum() ≈ H_1.sum()``.
+    size : K, odd number of pixels per axis (None: the smallest K keeping >= 99.5 % of the
+        energy, measured on the simulation).
+    device : torch device (None: CUDA if available, else CPU).
+    cache : True (default cache folder), False (bypass) or a folder path.
+    oversample : simulation samples per pixel per axis (odd multiple of subsample; default >= 3).
+    """
+    z = _check_zernike(zernike)
+    depth = _check_depth(depth)
+    sub = _check_odd(subsample, "subsample")
+    size = _check_odd(size, "size")
+    os_ = _check_odd(oversample, "oversample") or _default_oversample(cfg, sub)
+    if os_ % sub:
+        raise ValueError(f"oversample {os_} must be a multiple of subsample {sub}")
+    dev = resolve_device(device)
+    dx = cfg.pixel_pitch / os_
+    nnum = cfg.nnum
+    gmax = _grad_max(cfg, z, depth, phase)
+    reach = _ray_reach(cfg, gmax) + TAIL_LAMBDA_NA * cfg.wavelength / cfg.na
+    m_need = math.ceil(reach / cfg.mla_pitch + 0.5)
+    if size is not None:
+        m_need = max(m_need, math.ceil((size / nnum - 1) / 2))
+    lenslets = 2 * m_need + 3
+    while lenslets * nnum * os_ < cfg.mla_focal * cfg.wavelength / dx**2:
+        lenslets += 2
+    n = lenslets * nnum * os_
+    radius = pupil_radius_samples(cfg, n * dx, gmax)
+    a, w, norm = pupil_samples(cfg, radius, z, depth, phase, amplitude)
+
+    folder = None if cache is True or cache is False else __import__("pathlib").Path(cache)
+    key = None
+    if cache is not False:
+        key = _cache.cache_key(PSF_CODE_VERSION, "view_psfs", cfg.digest(), a.astype(np.float32),
+                               w.astype(np.float32), radius, depth, sub, size, os_, n)
+        hit = _cache.load(key, folder)
+        if hit is not None:
+            return hit
+
+    u0 = point_field(cfg, a, w, norm, radius, n, dx, dev)
+    bank = _simulate_bank(cfg, u0, os_, sub, lenslets, dev)
+    kmax = (lenslets - 2) * nnum  # exclude the guard lenslets (wrap-around)
+    if size is None:
+        energy = bank.sum(axis=(0, 1))
+        size, kept = _window_size(energy, sub, kmax)
+        if kept < 1 - ENERGY_CUT:
+            warnings.warn(f"view_psfs: window of {size} px keeps only {kept:.4f} of the energy",
+                          stacklevel=2)
+    out = np.ascontiguousarray(_crop(bank, size * sub), dtype=np.float32)
+    if key is not None:
+        _cache.store(key, out, folder)
+    return out
+
+
+def _simulate_bank(cfg, u0: torch.Tensor, os_, sub, lenslets, dev) -> np.ndarray:
+    """Full bank on the whole simulated grid, (nnum, nnum, L·nnum·sub, L·nnum·sub), from the
+    field ``u0`` (n, n) of a point at the centre of the central lenslet."""
+    nnum = cfg.nnum
+    n = u0.shape[0]
+    dx = cfg.pixel_pitch / os_
+    tile = torch.as_tensor(_lenslet_tile(cfg, os_), dtype=torch.complex64, device=dev)
+    mla = tile.repeat(lenslets, lenslets)
+    hz = torch.as_tensor(_transfer(n, dx, cfg.mla_focal, cfg.wavelength),
+                         dtype=torch.complex64, device=dev)
+    half = (nnum * sub) // 2
+    offs = np.arange(-half, half + 1)
+    sy, sx = (g.ravel() for g in np.meshgrid(offs, offs, indexing="ij"))
+    step = os_ // sub  # grid samples per fine position
+    full = lenslets * nnum * sub
+    cf = full // 2
+    bank = torch.zeros((nnum, nnum, full, full), dtype=torch.float32, device=dev)
+    mrange = (np.arange(lenslets) - lenslets // 2) * nnum * sub
+    budget = (2 << 30) if dev.type == "cuda" else (128 << 20)
+    batch = max(1, min(len(sy), budget // (n * n * 8 * 3)))
+    big = u0.repeat(2, 2)  # periodic copy: a shifted field is a window of it (no torch.roll)
+    work = torch.empty((batch, n, n), dtype=torch.complex64, device=dev)
+    from tqdm.auto import tqdm
+
+    starts = range(0, len(sy), batch)
+    for s0 in tqdm(starts, desc="view PSFs", disable=None if len(starts) > 4 else True,
+                   leave=False):
+        by, bx = sy[s0:s0 + batch], sx[s0:s0 + batch]
+        b = len(by)
+        u = work[:b]
+        for i in range(b):  # point at s: U0(r - s), times the lenslet array, in one pass
+            oy, ox = (-int(by[i]) * step) % n, (-int(bx[i]) * step) % n
+            torch.mul(big[oy:oy + n, ox:ox + n], mla, out=u[i])
+        u = torch.fft.ifft2(torch.fft.fft2(u).mul_(hz))
+        ri = torch.view_as_real(u)
+        inten = ri[..., 0].square()
+        inten.addcmul_(ri[..., 1], ri[..., 1])
+        pix = _bin(inten, os_)
+        blocks = pix.reshape(b, lenslets, nnum, lenslets, nnum).permute(2, 4, 0, 1, 3)
+        iy = torch.as_tensor(cf + mrange[None, :] - by[:, None], device=dev)[:, :, None]
+        ix = torch.as_tensor(cf + mrange[None, :] - bx[:, None], device=dev)[:, None, :]
+        bank[:, :, iy, ix] = blocks
+    bank /= sub * sub
+    return bank.cpu().numpy()
+
+
+def _bin(inten: torch.Tensor, k: int) -> torch.Tensor:
+    """Sum k x k blocks of the last two axes (sizes divisible by k)."""
+    *lead, h, w = inten.shape
+    a = inten.reshape(*lead, h // k, k, w)
+    acc = a[..., 0, :].clone()
+    for i in range(1, k):
+        acc += a[..., i, :]
+    a = acc.reshape(*lead, h // k, w // k, k)
+    acc = a[..., 0].clone()
+    for i in range(1, k):
+        acc += a[..., i]
+    return acc
+
+
+# ----------------------------------------------------------------------------- widefield
+def widefield_psf(cfg: SystemConfig, zernike=None, depth: float = 0.0, sampling=None, *,
+                  phase: PupilFn | None = None, amplitude=None, size: int | None = None,
+                  device=None) -> np.ndarray:
+    """PSF of a conventional 2D sensor behind the same lens: (K, K) float32.
+
+    Each value is the fraction of a unit point's photons on a pixel of side ``sampling``
+    (default ``cfg.pixel_pitch``) [m], centre index ``K // 2`` = the point; the sum is the
+    fraction of light on the K×K window (≈ 1 for the clear pupil). Same pupil arguments as
+    :func:`view_psfs`. ``size`` None: smallest odd K keeping >= 99.5 % of the energy.
+    """
+    z = _check_zernike(zernike)
+    depth = _check_depth(depth)
+    size = _check_odd(size, "size")
+    if sampling is None:
+        sampling = cfg.pixel_pitch
+    if isinstance(sampling, bool) or not isinstance(sampling, (int, float, np.floating)) \
+            or not (math.isfinite(sampling) and sampling > 0):
+        raise ValueError(f"sampling must be a positive pixel size in metres, got {sampling!r}")
+    dev = resolve_device(device)
+    lam_na = cfg.wavelength / cfg.na
+    os_ = 3
+    while sampling / os_ > 0.9 * lam_na / 4:  # intensity band limit 2NA/λ at Nyquist
+        os_ += 2
+    dx = sampling / os_
+    gmax = _grad_max(cfg, z, depth, phase)
+    if size is None:  # search window: the ray bundle plus 30 λ/NA
+        npix = 2 * math.ceil((_ray_reach(cfg, gmax) + 30.0 * lam_na) / sampling) + 1
+    else:
+        npix = size
+    n = npix * os_
+    radius = pupil_radius_samples(cfg, n * dx, gmax)
+    a, w, norm = pupil_samples(cfg, radius, z, depth, phase, amplitude)
+    u0 = point_field(cfg, a, w, norm, radius, n, dx, dev, dtype=torch.complex128)
+    inten = u0.real.square() + u0.imag.square()
+    pix = _bin(inten, os_).cpu().numpy()
+    if size is None:
+        total = float(np.sum(a**2) / norm)  # all the light reaching the image plane
+        size, _ = _window_size(pix, 1, npix, total=total)
+    return np.ascontiguousarray(_crop(pix, size), dtype=np.float32)

@@ -1,0 +1,312 @@
+"""Lenslet-grid calibration from a white (flat-field) frame or any textured raw frame.
+
+Method (hand-written; numpy/scipy do the transforms and the optimisation):
+
+1. The lenslet pattern is a 2-D lattice: its Fourier transform has peaks at the reciprocal
+   lattice vectors ``g1 = (sin t, cos t) / pitch`` (the "x" peak) and ``g2 = (cos t, -sin t) /
+   pitch`` (rows, columns; t = rotation). An FFT of the Hann-windowed frame finds them coarsely.
+2. Each peak is refined sub-bin by maximising the windowed DFT magnitude ``|F(g)|`` over the
+   continuous frequency (Nelder-Mead; ``F(g) = e_y(g)^T (I w) e_x(g)`` costs one
+   matrix-vector product). For a non-negative scene times the lattice this maximum is unbiased.
+3. Pitch and rotation are the similarity that fits both peaks; the phases of ``F(g1)``,
+   ``F(g2)`` (coordinates relative to the window centre) give a lattice point: a lenslet centre.
+4. Scan-phase offsets: the phase change of the same two Fourier components between frames
+   gives each frame's grid displacement modulo the lattice; the lattice translate nearest the
+   nominal step is taken.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy import ndimage, optimize
+
+from metasensor.sensor.calibration import Calibration
+
+__all__ = ["find_grid", "measure_offsets", "calibrate", "flat_field", "lattice_phase"]
+
+_MAX_SIDE = 4096  # the grid fit uses at most this central crop per axis (plenty of lenslets)
+
+
+def _as_image(frame, what: str = "frame") -> np.ndarray:
+    frame = np.asarray(frame)
+    if frame.ndim != 2:
+        raise ValueError(f"{what} must be a 2-D (H, W) image, got shape {frame.shape}")
+    if frame.dtype.kind not in "uif" or frame.dtype == np.float16:
+        raise TypeError(f"{what} must be an integer or float32/float64 image, got {frame.dtype}")
+    img = frame.astype(np.float64)
+    if not np.isfinite(img).all():
+        raise ValueError(f"{what} contains NaN or infinite values")
+    return img
+
+
+class _Dft:
+    """Windowed DFT of one image at arbitrary 2-D frequencies (cycles/px), coordinates
+    relative to the image centre."""
+
+    def __init__(self, img: np.ndarray) -> None:
+        h, w = img.shape
+        win = np.outer(np.hanning(h), np.hanning(w))
+        self.weighted = (img - img.mean()) * win
+        self.norm = float((img * win).sum())
+        self.y = np.arange(h) - (h - 1) / 2
+        self.x = np.arange(w) - (w - 1) / 2
+
+    def __call__(self, g: np.ndarray) -> complex:
+        ey = np.exp(-2j * np.pi * g[0] * self.y)
+        ax = -2 * np.pi * g[1] * self.x
+        rows = self.weighted @ np.cos(ax) + 1j * (self.weighted @ np.sin(ax))  # real BLAS
+        return complex(ey @ rows)
+
+
+def _crop(img: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    h, w = img.shape
+    y0 = max(0, (h - _MAX_SIDE) // 2)
+    x0 = max(0, (w - _MAX_SIDE) // 2)
+    return img[y0:y0 + _MAX_SIDE, x0:x0 + _MAX_SIDE], np.array([y0, x0], float)
+
+
+def _coarse_peaks(img: np.ndarray, nnum: int, pitch_range: tuple[float, float]):
+    h, w = img.shape
+    win = np.outer(np.hanning(h), np.hanning(w))
+    spec = np.abs(np.fft.fft2((img - img.mean()) * win))
+    fy = np.fft.fftfreq(h)[:, None]
+    fx = np.fft.fftfreq(w)[None, :]
+    rad = np.hypot(fy, fx)
+    ring = (rad >= 1 / pitch_range[1]) & (rad <= 1 / pitch_range[0])
+    peaks = []
+    for along, across in ((fx, fy), (fy, fx)):  # g1 near +x, g2 near +y
+        sel = ring & (along > 0) & (np.abs(across) < along * math.tan(math.radians(30)))
+        if not sel.any():
+            raise ValueError(f"frame of {h}x{w} px is too small to hold a lenslet grid of "
+                             f"~{nnum} px pitch")
+        k = np.argmax(np.where(sel, spec, -1.0))
+        iy, ix = np.unravel_index(k, spec.shape)
+        peaks.append((np.array([fy[iy, 0], fx[0, ix]]), spec[iy, ix]))
+    floor = np.median(spec[ring]) + 1e-12
+    return peaks, floor
+
+
+def _refine(dft: _Dft, g0: np.ndarray, bins: np.ndarray) -> np.ndarray:
+    def cost(z):
+        return -abs(dft(g0 + z * bins))
+
+    res = optimize.minimize(cost, np.zeros(2), method="Nelder-Mead",
+                            options={"xatol": 2e-4, "fatol": 1e-15, "initial_simplex":
+                                     np.array([[0, 0], [0.5, 0], [0, 0.5]]), "maxiter": 400})
+    return g0 + res.x * bins
+
+
+def lattice_phase(frame: np.ndarray, g: np.ndarray) -> tuple[np.ndarray, float]:
+    """Phases (rad) and mean relative amplitude of the lattice components ``g`` (2 x 2, rows
+    g1, g2 in cycles/px) of ``frame``, with coordinates relative to the frame's centre."""
+    dft = _Dft(_as_image(frame))
+    vals = np.array([dft(gk) for gk in g])
+    return np.angle(vals), float(np.abs(vals).mean() / max(dft.norm, 1e-300))
+
+
+def find_grid(frame, nnum: int, pitch_range: tuple[float, float] | None = None) -> dict:
+    """Lenslet grid of one raw frame: ``{"pitch", "rotation" (deg), "point" (row, col) of one
+    lenslet centre near the frame centre, "g" (2 x 2 reciprocal vectors), "contrast"}``.
+
+    ``pitch_range``: search range of the pitch in px (default ``nnum`` ± 25 %).
+    """
+    img = _as_image(frame)
+    if min(img.shape) < 3 * nnum:
+        raise ValueError(f"frame of {img.shape[0]}x{img.shape[1]} px is too small to calibrate "
+                         f"a {nnum}-px lenslet grid (needs at least 3 lenslets per side)")
+    crop, origin = _crop(img)
+    pitch_range = pitch_range or (0.75 * nnum, 1.25 * nnum)
+    ((p1, a1), (p2, a2)), floor = _coarse_peaks(crop, nnum, pitch_range)
+    if min(a1, a2) < 8 * floor:
+        raise ValueError("no lenslet grid found in the frame (the lattice peaks are not above the "
+                         "background: a flat or lens-less frame?)")
+    dft = _Dft(crop)
+    bins = 1.0 / np.array(crop.shape, float)
+    g1 = _refine(dft, p1, bins)
+    g2 = _refine(dft, p2, bins)
+    # similarity fit: g1 = (sin t, cos t)/P, g2 = (cos t, -sin t)/P
+    t1 = math.atan2(g1[0], g1[1])
+    t2 = math.atan2(-g2[1], g2[0])
+    t = math.atan2(math.sin(t1) + math.sin(t2), math.cos(t1) + math.cos(t2))
+    pitch = 2.0 / (np.hypot(*g1) + np.hypot(*g2))
+    g = np.array([[math.sin(t), math.cos(t)], [math.cos(t), -math.sin(t)]]) / pitch
+    vals = np.array([dft(gk) for gk in g])
+    frac = -np.angle(vals) / (2 * np.pi)  # g . (c - centre) = frac (mod 1)
+    centre = (np.array(crop.shape, float) - 1) / 2
+    point = centre + np.linalg.solve(g, frac) + origin
+    point = _brightest_phase(img, point, g, pitch)
+    return {"pitch": float(pitch), "rotation": math.degrees(t), "point": point, "g": g,
+            "contrast": float(np.abs(vals).mean() / max(dft.norm, 1e-300))}
+
+
+def _brightest_phase(img: np.ndarray, point: np.ndarray, g: np.ndarray, pitch: float):
+    """Lenslet centres are bright: if the half-period-shifted lattice is brighter (a negative
+    pattern coefficient), move the point by half a lattice cell."""
+    a = np.linalg.inv(g).T  # rows: lattice vectors a_x, a_y (sensor px)
+    k = np.arange(-3, 4)
+    ii, jj = np.meshgrid(k, k, indexing="ij")
+    pts = point + ii.ravel()[:, None] * a[1] + jj.ravel()[:, None] * a[0]
+    half = pts + 0.5 * (a[0] + a[1])
+    on = ndimage.map_coordinates(img, pts.T, order=1, mode="nearest").mean()
+    off = ndimage.map_coordinates(img, half.T, order=1, mode="nearest").mean()
+    return point + 0.5 * (a[0] + a[1]) if off > on else point
+
+
+def measure_offsets(frames, grid: dict, nominal: list[tuple[float, float]]) -> np.ndarray:
+    """Grid displacement [sensor px] of every frame from ``grid["point"]`` (the lattice of the
+    reference frame), ``(T, 2)``: the phase change of the lattice components gives it modulo
+    the lattice; the translate nearest ``nominal[t]`` (sensor px) is taken."""
+    g = np.asarray(grid["g"])
+    ref = np.asarray(grid["point"], float)
+    out = []
+    for t, frame in enumerate(frames):
+        img = _as_image(frame, f"frame {t}")
+        crop, origin = _crop(img)
+        centre = (np.array(crop.shape, float) - 1) / 2 + origin
+        dft = _Dft(crop)
+        frac = -np.angle(np.array([dft(gk) for gk in g])) / (2 * np.pi)
+        # lattice point of this frame: g . (c_t - centre) = frac (mod 1)
+        want = g @ (ref + np.asarray(nominal[t], float) - centre)
+        frac = frac + np.round(want - frac)
+        out.append(centre + np.linalg.solve(g, frac) - ref)
+    return np.array(out)
+
+
+def _keep_lenslets(point, matrix, nnum: int, shape: tuple[int, int], shifts: list,
+                   border: float = 2.0) -> tuple[np.ndarray, tuple[int, int]]:
+    """Largest rectangle of lattice cells whose blocks stay ``border`` px inside the sensor at
+    every phase; returns (sensor centre of its cell (0, 0), (Ly, Lx))."""
+    h = (nnum - 1) / 2
+    a = matrix * nnum  # columns: lattice vectors along rectified rows, cols
+    span = int(max(shape) / (np.linalg.norm(a, axis=0).min())) + 2
+    k = np.arange(-span, span + 1)
+    ii, jj = np.meshgrid(k, k, indexing="ij")
+    corners = np.array([[-h - 0.5, -h - 0.5], [-h - 0.5, h + 0.5], [h + 0.5, -h - 0.5],
+                        [h + 0.5, h + 0.5]])
+    valid = np.ones(ii.shape, bool)
+    for shift in shifts:
+        base = point + np.asarray(shift, float)
+        for cy in corners:
+            pos = (base[:, None, None] + a[:, :1, None] * ii + a[:, 1:, None] * jj
+                   + (matrix @ cy)[:, None, None])
+            valid &= ((pos[0] >= border) & (pos[0] <= shape[0] - 1 - border)
+                      & (pos[1] >= border) & (pos[1] <= shape[1] - 1 - border))
+    if not valid.any():
+        raise ValueError("no lenslet stays on the sensor at every scan phase")
+    rows = np.flatnonzero(valid.any(1))
+    cols = np.flatnonzero(valid.any(0))
+    r0, r1, c0, c1 = rows[0], rows[-1] + 1, cols[0], cols[-1] + 1
+    while not valid[r0:r1, c0:c1].all():  # shave the worst edge until all cells are valid
+        sub = ~valid[r0:r1, c0:c1]
+        bad = [sub[0].mean(), sub[-1].mean(), sub[:, 0].mean(), sub[:, -1].mean()]
+        e = int(np.argmax(bad))
+        r0, r1, c0, c1 = (r0 + (e == 0), r1 - (e == 1), c0 + (e == 2), c1 - (e == 3))
+        if r0 >= r1 or c0 >= c1:
+            raise ValueError("no lenslet stays on the sensor at every scan phase")
+    origin = point + a @ np.array([k[r0], k[c0]], float)
+    return origin, (int(r1 - r0), int(c1 - c0))
+
+
+def calibrate(white, nnum: int, frames=None, scan: int = 1, scan_order=None,
+              moving: str = "mla", pitch_range: tuple[float, float] | None = None,
+              border: float = 2.0) -> Calibration:
+    """Calibrate the lenslet grid from ``white`` ``(H, W)`` (a flat-field frame, or any raw
+    frame of phase (0, 0) of a textured scene).
+
+    ``frames``: optional ``(T, H, W)`` frames of one scan period (T = scan², in
+    ``scan_order``; a sequence of 2-D frames works too): their actual grid displacements are
+    measured (``moving="mla"``) and stored against nominal. Returns a :class:`Calibration`
+    whose rectified grid keeps the lenslets that stay ``border`` px inside the sensor.
+    """
+    from metasensor.sensor.scan import check_scan_order
+
+    white = _as_image(white, "white frame")
+    order = check_scan_order(scan_order, scan)
+    grid = find_grid(white, nnum, pitch_range)
+    t = math.radians(grid["rotation"])
+    s = grid["pitch"] / nnum
+    m = s * np.array([[math.cos(t), math.sin(t)], [-math.sin(t), math.cos(t)]])
+    d = nnum // scan
+    nominal = [m @ np.array([r * d, c * d], float) if moving == "mla" else np.zeros(2)
+               for r, c in order]
+    offsets = None
+    if frames is not None:
+        if len(frames) != len(order):
+            raise ValueError(f"got {len(frames)} calibration frames but a {scan}x{scan} scan "
+                             f"needs {len(order)}")
+        for k, fr in enumerate(frames):
+            if np.shape(fr) != white.shape:
+                raise ValueError(f"calibration frame {k} has shape {np.shape(fr)}, the white "
+                                 f"frame {white.shape}")
+        if moving == "mla":
+            meas = measure_offsets(frames, grid, nominal)
+            k0 = order.index((0, 0))
+            grid["point"] = grid["point"] + meas[k0]  # phase (0, 0) of this scan is the origin
+            offsets = [tuple(o - meas[k0]) for o in meas]
+        else:
+            offsets = [(0.0, 0.0)] * len(order)
+    shifts = offsets if offsets is not None else nominal
+    origin, lenslets = _keep_lenslets(grid["point"], m, nnum, white.shape, shifts, border)
+    return Calibration(nnum=nnum, pitch=grid["pitch"], rotation=grid["rotation"],
+                       center=tuple(origin), lenslets=lenslets, sensor_shape=white.shape,
+                       scan=scan, moving=moving, scan_order=tuple(order), offsets=offsets,
+                       contrast=grid["contrast"])
+
+
+def flat_field(white, calib: Calibration) -> np.ndarray:
+    """Flat-field (vignetting) map per pixel of the rectified phase-(0, 0) grid,
+    ``(Ly*nnum, Lx*nnum)`` float32, normalised to 1 at the bright (99.5th percentile) level.
+    In views it is phase independent (the vignetting moves with the MLA): see
+    :func:`metasensor.sensor.rectify.flat_views`."""
+    from metasensor.sensor.rectify import rectify_frame
+
+    white = _as_image(white, "white frame")
+    rect = rectify_frame(white, calib, (0, 0), use_offsets=False)
+    ly, lx = calib.lenslets
+    flat = rect[: ly * calib.nnum, : lx * calib.nnum]
+    level = np.percentile(flat, 99.5)
+    if not level > 0:
+        raise ValueError("white frame is dark: cannot build a flat field")
+    return (flat / level).astype(np.float32)
+
+
+def grid_of(calib: Calibration) -> dict:
+    """The lattice of a calibration as :func:`find_grid` returns it (reference point: the
+    centre of rectified lenslet (0, 0) at phase (0, 0))."""
+    t = math.radians(calib.rotation)
+    g = np.array([[math.sin(t), math.cos(t)], [math.cos(t), -math.sin(t)]]) / calib.pitch
+    return {"pitch": calib.pitch, "rotation": calib.rotation, "g": g,
+            "point": np.asarray(calib.center, float), "contrast": calib.contrast}
+
+
+def frame_offset(frame, calib: Calibration, phase: tuple[int, int]) -> tuple[float, float]:
+    """Measured grid displacement [sensor px] of one raw frame of ``phase`` (vs the
+    calibration's phase (0, 0)), the lattice translate nearest the calibration's value."""
+    k = calib.scan_order.index(tuple(phase)) if tuple(phase) in calib.scan_order else None
+    if k is None:
+        raise ValueError(f"phase {tuple(phase)} is not in the calibration's scan order")
+    expect = (calib.offsets or calib.nominal_offsets)[k]
+    off = measure_offsets([frame], grid_of(calib), [expect])[0]
+    return float(off[0]), float(off[1])
+
+
+def adapt(calib: Calibration, scan: int, scan_order=None, moving: str = "mla",
+          border: float = 2.0) -> Calibration:
+    """The calibration for a capture with this scan: the same grid, offsets re-keyed to
+    ``scan_order`` when the scans match, else nominal offsets (measure them per frame) and the
+    kept lenslets recomputed for the new scan margin."""
+    from metasensor.sensor.scan import check_scan_order
+
+    order = check_scan_order(scan_order, scan)
+    if calib.scan == scan and calib.moving == moving and set(order) == set(calib.scan_order):
+        offsets = None if calib.offsets is None else tuple(calib.offset(p) for p in order)
+        return calib.replace(scan_order=tuple(order), offsets=offsets)
+    base = calib.replace(scan=scan, scan_order=tuple(order), moving=moving, offsets=None)
+    origin, lenslets = _keep_lenslets(np.asarray(calib.center, float), base.matrix, calib.nnum,
+                                      calib.sensor_shape, list(base.nominal_offsets), border)
+    # the flat field is stored per lenslet of the original kept grid: track where we are in it
+    cells = np.linalg.solve(base.matrix * calib.nnum, origin - np.asarray(calib.center))
+    shift = tuple(int(v) for v in np.round(cells) + np.array(calib.flat_origin))
+    return base.replace(center=tuple(origin), lenslets=lenslets, flat_origin=shift)

@@ -1,0 +1,96 @@
+"""Memory-speed pixel gathering for :func:`metasensor.sensor.realign.realign` (hand-written).
+
+``realign`` is pure data movement: view (u, v) sample ``(i*p + r, j*p + c)`` is pixel
+``(oy[t] + i*nnum + u, ox[t] + j*nnum + v)`` of frame ``t`` (the frame of phase (r, c)). NumPy's
+strided assignment does this one phase at a time and streams the whole output ``p²`` times with
+strided writes; the compiled kernel below instead builds every output row in one pass from the
+``p`` source rows it needs (which stay in cache) and writes it contiguously, threads over rows.
+No library offers this gather; numba (a dependency of aotools) compiles it. Without numba the
+NumPy path is used.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["gather_views", "have_numba"]
+
+try:  # numba is optional: present through aotools, but the NumPy path always works
+    import numba
+
+    @numba.njit(parallel=True, nogil=True, cache=True)
+    def _gather_numba(frames, out, tidx, offy, offx, n, p, ly, lx):  # pragma: no cover - jit
+        for k in numba.prange(n * ly * p):
+            u = k // (ly * p)
+            y = k % (ly * p)
+            i = y // p
+            r = y % p
+            for c in range(p):
+                t = tidx[r, c]
+                src = frames[t, offy[t] + i * n + u, offx[t]:]
+                for v in range(n):
+                    dst = out[u, v, y]
+                    for j in range(lx):
+                        dst[j * p + c] = src[j * n + v]
+
+    _HAVE_NUMBA = True
+except ImportError:  # pragma: no cover - environment dependent
+    _HAVE_NUMBA = False
+
+# below this many output samples the NumPy path is faster than compiling / threading
+_NUMBA_MIN_SIZE = 1 << 22
+_NUMBA_DTYPES = {np.dtype(t) for t in ("uint8", "uint16", "uint32", "int16", "int32",
+                                       "float32", "float64")}
+
+
+def have_numba() -> bool:
+    """Whether the compiled gather kernel is available."""
+    return _HAVE_NUMBA
+
+
+def _gather_numpy(frames, out, order, offsets, n, p, ly, lx) -> None:
+    for t, (r, c) in enumerate(order):
+        oy, ox = offsets[t]
+        block = frames[t][oy:oy + ly * n, ox:ox + lx * n].reshape(ly, n, lx, n)
+        out[:, :, r::p, c::p] = block.transpose(1, 3, 0, 2)
+
+
+def gather_views(frames, out: np.ndarray, order: list[tuple[int, int]],
+                 offsets: list[tuple[int, int]], n: int, p: int, ly: int, lx: int,
+                 engine: str = "auto") -> np.ndarray:
+    """Fill ``out`` ``(n, n, ly*p, lx*p)`` from ``frames`` (a ``(T, H, W)`` array or a sequence
+    of ``T`` 2-D arrays) whose frame ``t`` has phase ``order[t]`` and block origin
+    ``offsets[t]`` (rows, columns). ``engine``: ``"auto"``, ``"numba"`` or ``"numpy"``."""
+    if engine not in ("auto", "numba", "numpy"):
+        raise ValueError(f"engine must be 'auto', 'numba' or 'numpy', got {engine!r}")
+    use_numba = (
+        engine != "numpy" and _HAVE_NUMBA and isinstance(frames, np.ndarray)
+        and frames.dtype == out.dtype and frames.dtype in _NUMBA_DTYPES
+        and (engine == "numba" or out.size >= _NUMBA_MIN_SIZE)
+    )
+    if engine == "numba" and not use_numba:
+        raise ValueError("engine='numba' needs numba and a (T, H, W) array of a plain dtype")
+    if not use_numba:
+        _gather_numpy(frames, out, order, offsets, n, p, ly, lx)
+        return out
+    tidx = np.zeros((p, p), dtype=np.int64)
+    for t, (r, c) in enumerate(order):
+        tidx[r, c] = t
+    offy = np.array([o[0] for o in offsets], dtype=np.int64)
+    offx = np.array([o[1] for o in offsets], dtype=np.int64)
+    _gather_numba(frames, out, tidx, offy, offx, n, p, ly, lx)
+    return out
+
+
+def gather_views_torch(frames, order: list[tuple[int, int]], offsets: list[tuple[int, int]],
+                       n: int, p: int, ly: int, lx: int):
+    """The same gather for a torch tensor ``(T, H, W)`` on its own device (CUDA: at GPU memory
+    speed); returns a new tensor ``(n, n, ly*p, lx*p)``."""
+    import torch
+
+    out = torch.empty((n, n, ly * p, lx * p), dtype=frames.dtype, device=frames.device)
+    for t, (r, c) in enumerate(order):
+        oy, ox = offsets[t]
+        block = frames[t, oy:oy + ly * n, ox:ox + lx * n].reshape(ly, n, lx, n)
+        out[:, :, r::p, c::p] = block.permute(1, 3, 0, 2)
+    return out
