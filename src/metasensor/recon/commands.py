@@ -2,8 +2,168 @@
 
 from __future__ import annotations
 
+import json
+from pathlib import Path
+
+import numpy as np
 import typer
+
+__all__ = ["register", "read_psf_file", "parse_zernike", "write_outputs"]
+
+
+def parse_zernike(text: str | None) -> np.ndarray | None:
+    """``"4:0.5,7:-0.2"`` (Noll index: waves) -> Noll vector (45,), or None for empty."""
+    if not text:
+        return None
+    z = np.zeros(45)
+    for item in text.split(","):
+        try:
+            j, value = item.split(":")
+            j, value = int(j), float(value)
+        except ValueError:
+            raise ValueError(f"--zernike item {item!r} is not 'noll:waves' (e.g. 4:0.5)") from None
+        if j < 1:
+            raise ValueError(f"--zernike Noll index must be >= 1, got {j}")
+        if j > z.size:
+            z = np.pad(z, (0, j - z.size))
+        z[j - 1] = value
+    return z
+
+
+def read_psf_file(path: Path):
+    """PSF bank (nnum, nnum, K, K) and its SystemConfig (or None) from an HDF5 file ("psf")."""
+    import h5py
+
+    from metasensor.config import SystemConfig
+
+    if not path.is_file():
+        raise FileNotFoundError(f"PSF file not found: {path}")
+    try:
+        with h5py.File(path, "r") as f:
+            if "psf" not in f:
+                raise ValueError(f"{path}: no dataset 'psf'")
+            bank = np.asarray(f["psf"][...], dtype=np.float32)
+            attrs = dict(f["psf"].attrs) | dict(f.attrs)
+    except OSError as exc:
+        raise ValueError(f"{path}: not a readable HDF5 file ({exc})") from None
+    cfg = None
+    for key in ("config", "system", "cfg"):
+        if key in attrs:
+            text = attrs[key]
+            cfg = SystemConfig.from_json(text.decode() if isinstance(text, bytes) else str(text))
+            break
+    if cfg is None:
+        names = set(SystemConfig.__dataclass_fields__)
+        fields = {k: (v.item() if hasattr(v, "item") and np.ndim(v) == 0 else v)
+                  for k, v in attrs.items() if k in names}
+        if fields:
+            if "sensor_shape" in fields:
+                fields["sensor_shape"] = tuple(int(s) for s in np.ravel(fields["sensor_shape"]))
+            cfg = SystemConfig.from_dict(fields)
+    return bank, cfg
+
+
+def write_outputs(out: Path, rec, views) -> list[Path]:
+    """image.tif (float32, config JSON in the description), zernike.npy, summary.json and a PNG."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import tifffile
+
+    from metasensor.io.atomic import atomic_path, atomic_write_text
+
+    out.mkdir(parents=True, exist_ok=True)
+    image = np.asarray(rec.image, dtype=np.float32)
+    meta = {"metasensor": {"kind": "image", "config": rec.config.to_dict(), "method": rec.method}}
+    with atomic_path(out / "image.tif") as tmp:
+        tifffile.imwrite(tmp, image, description=json.dumps(meta), metadata=None)
+    with atomic_path(out / "zernike.npy") as tmp:
+        np.save(tmp, rec.zernike)
+    summary = {"method": rec.method, "blocks": [len(rec.history), len(rec.history[0])],
+               "iterations": rec.iterations, "subsets": rec.subsets, "seconds": rec.seconds,
+               "shape": list(image.shape), "history": rec.history}
+    atomic_write_text(out / "summary.json", json.dumps(summary, indent=1))
+    c = rec.config.center
+    d = rec.config.scan_step_px
+    centre = np.asarray(views[c, c], dtype=np.float32)
+    centre = np.kron(centre, np.ones((d, d), np.float32))
+    fig, axes = plt.subplots(1, 2, figsize=(10, 5.4), constrained_layout=True)
+    for ax, img, title in ((axes[0], centre, f"centre view ({c}, {c}), up-sampled x{d}"),
+                           (axes[1], image, f"ISA reconstruction ({rec.method})")):
+        lo, hi = np.percentile(img, [0.5, 99.5])
+        ax.imshow(img, cmap="gray", vmin=lo, vmax=hi if hi > lo else lo + 1)
+        ax.set_title(title)
+        ax.set_axis_off()
+    for b in rec.blocks[1:] if len(rec.blocks) > 1 else []:
+        y0, y1, x0, x1 = b.core
+        axes[1].plot([x0, x1, x1, x0, x0], [y0, y0, y1, y1, y0], lw=0.4, color="tab:orange")
+    with atomic_path(out / "reconstruction.png") as tmp:
+        fig.savefig(tmp, dpi=120)
+    plt.close(fig)
+    return [out / n for n in ("image.tif", "zernike.npy", "summary.json", "reconstruction.png")]
+
+
+def _parse_blocks(text: str) -> tuple[int, int]:
+    try:
+        by, bx = (int(t) for t in text.lower().split("x"))
+    except ValueError:
+        raise ValueError(f"--blocks must look like 4x4, got {text!r}") from None
+    return by, bx
 
 
 def register(app: typer.Typer) -> None:
     """Add this stage's commands to app."""
+
+    @app.command("reconstruct")
+    def reconstruct_cmd(
+        views: Path = typer.Argument(..., help="view stack (.tif pages u*nnum+v, or .zarr)"),
+        out: Path = typer.Option(..., "--out", help="output folder"),
+        psf: Path | None = typer.Option(None, "--psf", help="PSF bank (HDF5, dataset 'psf')"),
+        config: Path | None = typer.Option(None, "--config", help="system configuration TOML"),
+        method: str = typer.Option("isa", help="isa | wave | geometric (DAO first)"),
+        blocks: str = typer.Option("1x1", help="multisite blocks, e.g. 4x4"),
+        overlap: int = typer.Option(20, help="block overlap in output pixels"),
+        iterations: int | None = typer.Option(None, help="Richardson-Lucy iterations"),
+        subsets: int | None = typer.Option(None, help="view subsets per iteration"),
+        zernike: str | None = typer.Option(None, help="global aberration, e.g. '4:0.5,7:-0.2'"),
+        field_zernike: Path | None = typer.Option(
+            None, "--field-zernike", help=".npy (by, bx, J) Noll vectors over the field"),
+        scheduler: str | None = typer.Option(None, help="dask scheduler address tcp://host:port"),
+        device: str | None = typer.Option(None, help="cpu or cuda (default: cuda if present)"),
+    ) -> None:
+        """Reconstruct the all-in-focus image from views (ISA; multisite blocks through Dask).
+
+        Example: metasensor reconstruct cap/views.tif --config cfg.toml --blocks 4x4 --out result/
+        """
+        from metasensor.config import SystemConfig
+        from metasensor.io.views import read_config_from_views, read_views
+        from metasensor.recon.api import reconstruct
+
+        if psf is not None and config is not None:
+            raise ValueError("give either --psf or --config, not both")
+        if not views.exists():
+            raise FileNotFoundError(f"view stack not found: {views}")
+        bank = None
+        cfg = None
+        if psf is not None:
+            bank, cfg = read_psf_file(psf)
+        if config is not None:
+            cfg = SystemConfig.from_toml(config)
+        if cfg is None:
+            cfg = read_config_from_views(views)
+        if cfg is None:
+            raise ValueError(f"{views}: no system configuration stored; pass --config cfg.toml")
+        stack = read_views(views, nnum=cfg.nnum)
+        fz = None
+        if field_zernike is not None:
+            if not field_zernike.is_file():
+                raise FileNotFoundError(f"field Zernike file not found: {field_zernike}")
+            fz = np.load(field_zernike)
+        rec = reconstruct(stack, cfg, method=method, zernike=parse_zernike(zernike),
+                          field_zernike=fz, blocks=_parse_blocks(blocks), overlap=overlap,
+                          iterations=iterations, device=device, psf=bank, subsets=subsets,
+                          scheduler=scheduler, progress=True)
+        written = write_outputs(out, rec, stack)
+        typer.echo(f"reconstructed {rec.image.shape[0]}x{rec.image.shape[1]} px in "
+                   f"{rec.seconds:.1f} s -> {', '.join(str(p) for p in written)}")

@@ -1,1 +1,26 @@
-"""Simulator: raw meta-imaging captures with known truth, built-in scenes, comparison sensors."""
+"""Simulator: raw meta-imaging captures with known truth, built-in scenes, comparison sensors.
+
+``simulate(scene, cfg, ...) -> Capture`` (capture.py); scene dynamics ``Motion`` (motion.py) and
+``Turbulence`` (turbulence.py); built-in scenes ``load_scene`` (scenes.py); comparison sensors
+(comparison.py: ``SegmentedMirror``, ``plain_lightfield``); a single-lens field-aberration model
+``SingleLens`` (lens.py).
+"""
+
+from __future__ import annotations
+
+import importlib
+
+_EXPORTS = {
+    "simulate": "capture", "Capture": "capture", "Motion": "motion", "Turbulence": "turbulence",
+    "load_scene": "scenes", "resolution_chart": "scenes", "checkerboard": "scenes",
+    "SegmentedMirror": "comparison", "plain_lightfield": "comparison", "SingleLens": "lens",
+}
+__all__ = sorted(_EXPORTS)
+
+
+def __getattr__(name: str):
+    if name in _EXPORTS:
+        value = getattr(importlib.import_module(f"metasensor.simulate.{_EXPORTS[name]}"), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module 'metasensor.simulate' has no attribute {name!r}")

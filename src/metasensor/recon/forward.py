@@ -1,0 +1,252 @@
+"""The phase-space forward model of the views as an FFT operator (docs/conventions.md).
+
+``V[u, v] = S_d(H[u, v] ⊛ I)``: every view is the image convolved with that view's PSF and
+sampled every ``d = nnum // scan`` pixels. Hand-written (no library does the sampled phase-space
+convolution): instead of up-sampling the views to the image grid, the sampling is modelled
+exactly in the Fourier domain.
+
+- forward: one real FFT of the estimate, then per view multiply by its OTF and *fold* the spectrum
+  (the aliasing sum over the d x d sub-bands: sampling every d-th pixel) to the small spectrum of
+  the sampled view, and inverse-transform at the small size;
+- adjoint: small FFT of the view-domain array, *tile* its spectrum d x d times (the spectrum of the
+  zero-filled up-sampled array), multiply by the conjugate OTF, accumulate over views, and do one
+  inverse real FFT at full size.
+
+Geometry. The estimate lives on a padded *domain* of ``(Ny, Nx) = (My·d, Mx·d)`` pixels whose
+view samples sit exactly at multiples of d (sample (m, n) at domain pixel (m·d, n·d)); this makes
+the folding phase-free. A data window of ``(Sy, Sx)`` view samples starts at sample ``m0``; the
+window's local pixel ``(Y·d + d//2)`` (its sample Y, conventions.md) is domain pixel
+``(m0 + Y)·d``, so window pixel (0, 0) is domain pixel ``offset = m0·d − d//2``. The domain is
+padded by at least the PSF radius beyond the outermost samples, so the FFT's circular convolution
+equals the linear one on every observed sample (no wrap-around): the estimate outside the window is
+reconstructed too (from the light it spreads into the window), which removes edge ringing.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from metasensor.backend import resolve_device
+
+__all__ = ["Geometry", "make_geometry", "PhaseSpaceOperator", "smooth_size"]
+
+
+def _is_smooth(n: int, primes=(2, 3, 5, 7)) -> bool:
+    for p in primes:
+        while n % p == 0:
+            n //= p
+    return n == 1
+
+
+def smooth_size(n: int, d: int = 1) -> int:
+    """Smallest m >= n such that m and m·d are 7-smooth (fast FFT sizes); m alone if d is not."""
+    m = max(int(n), 1)
+    need_d = _is_smooth(d)
+    while not (_is_smooth(m) and (not need_d or _is_smooth(m * d))):
+        m += 1
+    return m
+
+
+@dataclass(frozen=True)
+class Geometry:
+    """Where a window of view samples sits in the padded estimate domain (all in pixels/samples).
+
+    window : (Sy, Sx) view samples of data; the window covers (Sy·d, Sx·d) image pixels.
+    d : view sample spacing in pixels.
+    m0 : (my, mx) domain sample index of window sample (0, 0).
+    grid : (My, Mx) samples of the whole domain; the domain is (My·d, Mx·d) pixels.
+    """
+
+    window: tuple[int, int]
+    d: int
+    m0: tuple[int, int]
+    grid: tuple[int, int]
+
+    @property
+    def domain(self) -> tuple[int, int]:
+        return (self.grid[0] * self.d, self.grid[1] * self.d)
+
+    @property
+    def offset(self) -> tuple[int, int]:
+        """Domain pixel of window pixel (0, 0) (negative: circular wrap, unpadded domain)."""
+        s = self.d // 2
+        return (self.m0[0] * self.d - s, self.m0[1] * self.d - s)
+
+    @property
+    def pixels(self) -> tuple[int, int]:
+        return (self.window[0] * self.d, self.window[1] * self.d)
+
+    def sample_slices(self) -> tuple[slice, slice]:
+        """Slices of the domain's sample grid that hold the window's samples."""
+        return (slice(self.m0[0], self.m0[0] + self.window[0]),
+                slice(self.m0[1], self.m0[1] + self.window[1]))
+
+    def crop(self, image: torch.Tensor) -> torch.Tensor:
+        """The window's (Sy·d, Sx·d) pixels out of a domain image (..., Ny, Nx)."""
+        oy, ox = self.offset
+        hy, hx = self.pixels
+        if oy < 0 or ox < 0:  # unpadded, circular domain
+            image = torch.roll(image, shifts=(-oy, -ox), dims=(-2, -1))
+            oy, ox = 0, 0
+        return image[..., oy:oy + hy, ox:ox + hx]
+
+
+def make_geometry(window: tuple[int, int], d: int, radius: int, pad: bool = True) -> Geometry:
+    """Domain for a window of view samples and a PSF of ``radius`` pixels (K = 2·radius + 1).
+
+    ``pad=True``: margins of at least ``radius`` pixels beyond the outermost samples (linear
+    convolution on the observed samples), rounded up to a fast FFT size. ``pad=False``: the domain
+    is the window itself (circular convolution; wraps around at the edges; for comparison).
+    """
+    sy, sx = (int(window[0]), int(window[1]))
+    if sy < 1 or sx < 1:
+        raise ValueError(f"window must hold at least one view sample per axis, got {window}")
+    if d < 1:
+        raise ValueError(f"sample spacing d must be >= 1, got {d}")
+    if not pad:
+        return Geometry((sy, sx), d, (0, 0), (sy, sx))
+    lead = math.ceil(radius / d)
+    trail = math.ceil((radius + 1) / d)
+    my = smooth_size(sy + lead + trail, d)
+    mx = smooth_size(sx + lead + trail, d)
+    return Geometry((sy, sx), d, (lead, lead), (my, mx))
+
+
+class PhaseSpaceOperator:
+    """The linear map A: domain image (Ny, Nx) -> view samples (V, My, Mx), and its adjoint.
+
+    Holds the OTFs of a PSF bank (computed once; complex64 half spectra (V, Ny, Nx//2+1)) and the
+    geometry. ``psf``: (V, K, K) float, K odd, centre K//2 = zero displacement (one PSF per used
+    view, conventions.md). ``chunk``: views transformed together (speed vs memory).
+    Calls never change the object's state.
+    """
+
+    def __init__(self, psf, geometry: Geometry, device=None, chunk: int = 8):
+        self.device = resolve_device(device)
+        psf_t = torch.as_tensor(np.asarray(psf) if not isinstance(psf, torch.Tensor) else psf)
+        psf_t = psf_t.to(device=self.device, dtype=torch.float32)
+        if psf_t.ndim != 3 or psf_t.shape[-1] != psf_t.shape[-2] or psf_t.shape[-1] % 2 == 0:
+            raise ValueError(
+                f"psf must have shape (views, K, K) with K odd, got {tuple(psf_t.shape)}")
+        if not torch.isfinite(psf_t).all():
+            raise ValueError("psf contains NaN or infinite values")
+        self.geometry = geometry
+        self.n_views = psf_t.shape[0]
+        self.k = psf_t.shape[-1]
+        self.radius = self.k // 2
+        ny, nx = geometry.domain
+        if self.k > min(ny, nx):
+            raise ValueError(f"PSF size {self.k} exceeds the estimate domain {ny}x{nx}")
+        self.chunk = max(int(chunk), 1)
+        self.otf = self._otfs(psf_t)
+        my, mx = geometry.grid
+        self._cols = torch.arange(nx // 2 + 1, device=self.device) % mx
+        self.psf_sums = psf_t.sum(dim=(-2, -1))
+
+    # ------------------------------------------------------------------ setup
+    def _otfs(self, psf: torch.Tensor) -> torch.Tensor:
+        ny, nx = self.geometry.domain
+        r = self.radius
+        out = torch.empty((self.n_views, ny, nx // 2 + 1), dtype=torch.complex64,
+                          device=self.device)
+        for i in range(0, self.n_views, self.chunk):
+            block = psf[i:i + self.chunk]
+            padded = torch.zeros((block.shape[0], ny, nx), device=self.device)
+            padded[:, :self.k, :self.k] = block
+            padded = torch.roll(padded, shifts=(-r, -r), dims=(-2, -1))
+            out[i:i + block.shape[0]] = torch.fft.rfft2(padded)
+        return out
+
+    # ------------------------------------------------------------------ building blocks
+    def spectrum(self, image: torch.Tensor) -> torch.Tensor:
+        """Half spectrum (Ny, Nx//2+1) of a domain image."""
+        return torch.fft.rfft2(image)
+
+    def predict(self, spec: torch.Tensor, views: slice | torch.Tensor) -> torch.Tensor:
+        """View samples (c, My, Mx) of the views ``views`` from an image's half spectrum."""
+        d = self.geometry.d
+        my, _ = self.geometry.grid
+        _, nx = self.geometry.domain
+        nh = nx // 2 + 1
+        otf = self.otf[views].view(-1, d, my, nh)
+        spec = spec.view(d, my, nh)
+        # fold the rows (sampling every d-th row): Σ_k OTF·G over the d row sub-bands, fused
+        folded = torch.mul(otf[:, 0], spec[0])
+        for k in range(1, d):
+            folded.addcmul_(otf[:, k], spec[k])
+        rows = torch.fft.ifft(folded, dim=-2)  # the sampled rows' half spectra along x
+        full = torch.fft.irfft(rows, n=nx, dim=-1)
+        return full[..., ::d] / d
+
+    def backproject_spectrum(self, samples: torch.Tensor, views: slice | torch.Tensor,
+                             out: torch.Tensor | None = None) -> torch.Tensor:
+        """Accumulate Σ_views conj(OTF)·spectrum(S_dᵀ samples) into a half spectrum (Ny, Nh)."""
+        d = self.geometry.d
+        my, _ = self.geometry.grid
+        ny, nx = self.geometry.domain
+        nh = nx // 2 + 1
+        small = torch.fft.fft2(samples)  # (c, My, Mx): the zero-filled array's spectrum, tiled
+        tiled = small[..., self._cols].conj()  # (c, My, Nh)
+        otf = self.otf[views]
+        # accumulate conj(Σ OTF·conj(U)) = Σ conj(OTF)·U without materialising conj(OTF)
+        acc = torch.zeros((d, my, nh), dtype=torch.complex64, device=self.device)
+        for i in range(otf.shape[0]):
+            acc.addcmul_(otf[i].view(d, my, nh), tiled[i][None])
+        acc = acc.conj().reshape(ny, nh)
+        if out is None:
+            return acc
+        out += acc
+        return out
+
+    def image_from_spectrum(self, spec: torch.Tensor) -> torch.Tensor:
+        ny, nx = self.geometry.domain
+        return torch.fft.irfft2(spec, s=(ny, nx))
+
+    def _chunks(self, views=None):
+        if views is None:
+            for i in range(0, self.n_views, self.chunk):
+                yield slice(i, min(i + self.chunk, self.n_views))
+            return
+        for i in range(0, len(views), self.chunk):
+            yield views[i:i + self.chunk]
+
+    # ------------------------------------------------------------------ the operator
+    def forward(self, image, views=None) -> torch.Tensor:
+        """A·image: (Ny, Nx) domain image -> (V, My, Mx) view samples (views: index tensor)."""
+        image = torch.as_tensor(image, dtype=torch.float32, device=self.device)
+        if tuple(image.shape) != self.geometry.domain:
+            raise ValueError(f"image must have the domain shape {self.geometry.domain}, "
+                             f"got {tuple(image.shape)}")
+        spec = self.spectrum(image)
+        return torch.cat([self.predict(spec, c) for c in self._chunks(views)])
+
+    def adjoint(self, samples, views=None) -> torch.Tensor:
+        """Aᵀ·samples: (V, My, Mx) -> (Ny, Nx) domain image."""
+        samples = torch.as_tensor(samples, dtype=torch.float32, device=self.device)
+        n = self.n_views if views is None else len(views)
+        if tuple(samples.shape) != (n, *self.geometry.grid):
+            raise ValueError(f"samples must have shape {(n, *self.geometry.grid)}, "
+                             f"got {tuple(samples.shape)}")
+        ny, nx = self.geometry.domain
+        acc = torch.zeros((ny, nx // 2 + 1), dtype=torch.complex64, device=self.device)
+        start = 0
+        for c in self._chunks(views):
+            count = len(range(self.n_views)[c]) if isinstance(c, slice) else len(c)
+            self.backproject_spectrum(samples[start:start + count], c, out=acc)
+            start += count
+        return self.image_from_spectrum(acc)
+
+    def sensitivity(self, mask: torch.Tensor, views=None) -> torch.Tensor:
+        """Aᵀ applied to ``mask`` (My, Mx) on every view in ``views``: (Ny, Nx), >= 0 up to fp."""
+        idx = slice(None) if views is None else views
+        ny, nx = self.geometry.domain
+        d = self.geometry.d
+        my, _ = self.geometry.grid
+        otf_sum = self.otf[idx].sum(dim=0)
+        small = torch.fft.fft2(mask.to(torch.float32))[..., self._cols]
+        spec = (otf_sum.view(d, my, -1).conj() * small[None]).reshape(ny, -1)
+        return self.image_from_spectrum(spec)

@@ -1,0 +1,152 @@
+"""Incoherent synthetic aperture (ISA): phase-space Richardson–Lucy deconvolution of the views.
+
+Hand-written (the authors' algorithm, Lu et al. Opt. Express 2019, in our sampled forward model,
+:mod:`metasensor.recon.forward`). Ordered-subset Richardson–Lucy (OS-EM):
+
+    I <- I · A_Sᵀ(y_S / A_S I) / A_Sᵀ(1)
+
+for each subset S of views in turn. ``subsets = n_views`` is the authors' sequential per-view
+update; ``subsets = 1`` is the simultaneous (plain Richardson–Lucy) update. The normaliser
+``A_Sᵀ(1)`` is computed over the observed samples only (a mask), so the unobserved margins of the
+padded domain are estimated without ringing (Bertero & Boccacci's boundary treatment).
+Views are visited in a ``spiral`` from the outermost pupil ring inwards (the authors' order), or by
+pupil ``radius`` from the centre outwards, or ``raster``; subsets interleave that order, so every
+subset covers the whole pupil.
+
+Non-negative by construction; every division is guarded (no NaN, no Inf): a predicted sample below
+``eps`` (relative to the data's mean) counts as ``eps``; where the normaliser is below ``1e-6`` of
+its maximum (pixels that no observed sample sees) the estimate is left unchanged.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+import torch
+
+from metasensor.recon.forward import PhaseSpaceOperator
+
+__all__ = ["view_order", "make_subsets", "subset_major", "richardson_lucy", "RLResult",
+           "DEFAULT_ITERATIONS", "DEFAULT_SUBSETS"]
+
+DEFAULT_ITERATIONS = 5
+DEFAULT_SUBSETS = 8  # chosen by measurement (benchmarks/bench_isa.py): see recon/api.py
+
+_ORDERS = ("spiral", "radius", "raster")
+
+
+def view_order(mask: np.ndarray, order: str = "spiral") -> list[tuple[int, int]]:
+    """The (u, v) of the views in ``mask`` (nnum, nnum) in visiting order.
+
+    ``spiral``: outermost pupil radius first, counter-clockwise within a ring (the authors' order);
+    ``radius``: centre view first, then by increasing radius; ``raster``: row-major.
+    """
+    if order not in _ORDERS:
+        raise ValueError(f"order must be one of {_ORDERS}, got {order!r}")
+    mask = np.asarray(mask, dtype=bool)
+    n = mask.shape[0]
+    c = n // 2
+    uv = [(int(u), int(v)) for u, v in zip(*np.nonzero(mask), strict=True)]
+    if order == "raster":
+        return uv
+
+    def polar(p):
+        dy, dx = p[0] - c, p[1] - c
+        return math.hypot(dy, dx), math.atan2(dy, dx) % (2 * math.pi)
+
+    if order == "spiral":
+        return sorted(uv, key=lambda p: (-round(polar(p)[0], 6), polar(p)[1]))
+    return sorted(uv, key=lambda p: (round(polar(p)[0], 6), polar(p)[1]))
+
+
+def make_subsets(n_views: int, n_subsets: int) -> list[list[int]]:
+    """Split positions 0..n_views-1 (already in visiting order) into interleaved subsets."""
+    n_subsets = int(min(max(n_subsets, 1), n_views))
+    return [list(range(k, n_views, n_subsets)) for k in range(n_subsets)]
+
+
+def subset_major(items: list, n_subsets: int) -> list:
+    """Reorder ``items`` (in visiting order) so each interleaved subset is a consecutive run.
+
+    :func:`richardson_lucy` takes subsets as consecutive runs of the operator's views (contiguous
+    OTF slices, no copies); feed it views in this order.
+    """
+    return [items[i] for g in make_subsets(len(items), n_subsets) for i in g]
+
+
+def _runs(n_views: int, n_subsets: int) -> list[slice]:
+    sizes = [len(g) for g in make_subsets(n_views, n_subsets)]
+    starts = np.cumsum([0] + sizes)
+    return [slice(int(a), int(b)) for a, b in zip(starts[:-1], starts[1:], strict=True)]
+
+
+@dataclass
+class RLResult:
+    """Domain estimate (Ny, Nx) and the relative residual ||y − A I|| / ||y|| per iteration."""
+
+    estimate: torch.Tensor
+    history: list[float] = field(default_factory=list)
+
+
+def richardson_lucy(op: PhaseSpaceOperator, data: torch.Tensor, mask: torch.Tensor,
+                    iterations: int = DEFAULT_ITERATIONS, subsets: int = DEFAULT_SUBSETS,
+                    init: torch.Tensor | None = None, eps: float = 1e-6,
+                    progress=None) -> RLResult:
+    """Ordered-subset Richardson–Lucy on the phase-space operator ``op``.
+
+    data : (V, My, Mx) float view samples on the domain's sample grid (zero where unobserved),
+        V in the operator's view order. mask : (My, Mx) bool, True on observed samples.
+    subsets : number of view subsets per iteration (1 = simultaneous, V = sequential per view);
+        subset k is the k-th consecutive run of the operator's views (see :func:`subset_major`).
+    Residual history: for subsets > 1 each subset's residual is taken before its own update.
+    """
+    dev = op.device
+    data = torch.as_tensor(data, dtype=torch.float32, device=dev)
+    mask_t = torch.as_tensor(mask, dtype=torch.bool, device=dev)
+    if tuple(data.shape) != (op.n_views, *op.geometry.grid):
+        raise ValueError(f"data must have shape {(op.n_views, *op.geometry.grid)}, "
+                         f"got {tuple(data.shape)}")
+    if iterations < 0:
+        raise ValueError(f"iterations must be >= 0, got {iterations}")
+    maskf = mask_t.to(torch.float32)
+    data = torch.clamp(torch.nan_to_num(data, nan=0.0), min=0.0) * maskf
+    n_obs = max(float(maskf.sum()) * op.n_views, 1.0)
+    mean = float(data.sum()) / n_obs
+    floor = eps * max(mean, 1e-30)
+    data_norm = max(float(torch.linalg.vector_norm(data)), 1e-30)
+
+    idx = _runs(op.n_views, subsets)
+    sens = [op.sensitivity(maskf, g) for g in idx]
+    valid = [s > 1e-6 * float(s.max()) for s in sens]
+    sens = [torch.where(v, s, torch.ones_like(s)) for s, v in zip(sens, valid, strict=True)]
+
+    if init is None:
+        total = sum(float((s * v).sum()) for s, v in zip(sens, valid, strict=True))
+        level = float(data.sum()) / max(total, 1e-30)
+        estimate = torch.full(op.geometry.domain, max(level, floor), device=dev)
+    else:
+        estimate = torch.clamp(torch.as_tensor(init, dtype=torch.float32, device=dev), min=0)
+        estimate = estimate.clone()
+    history: list[float] = []
+    ny, nx = op.geometry.domain
+    for _ in range(iterations):
+        sq = 0.0
+        for g, s, v in zip(idx, sens, valid, strict=True):
+            spec = op.spectrum(estimate)
+            acc = torch.zeros((ny, nx // 2 + 1), dtype=torch.complex64, device=dev)
+            for start in range(g.start, g.stop, op.chunk):
+                c = slice(start, min(start + op.chunk, g.stop))
+                pred = op.predict(spec, c)
+                y = data[c]
+                sq += float(torch.sum(((y - pred) * maskf) ** 2))
+                ratio = y / torch.clamp(pred, min=floor) * maskf
+                op.backproject_spectrum(ratio, c, out=acc)
+            back = op.image_from_spectrum(acc)
+            update = torch.where(v, torch.clamp(back, min=0.0) / s, torch.ones_like(s))
+            estimate = estimate * update
+        history.append(math.sqrt(sq) / data_norm)
+        if progress is not None:
+            progress(1)
+    return RLResult(estimate, history)

@@ -1,0 +1,110 @@
+"""Comparison sensors from the same scene, optics and photon budget.
+
+- a conventional 2D sensor: the scene blurred by the widefield PSF of the same (aberrated) lens,
+  integrated over the same pixels (the fine-grid model of :mod:`metasensor.simulate.kernels`);
+- hardware adaptive optics: an N × N segmented tip-tilt(-piston) mirror conjugate to the pupil,
+  its segments tiling the square around the pupil, measuring the wavefront perfectly. The residual
+  is the wavefront minus its per-segment least-squares piston/tip/tilt fit (paper, Methods). The
+  mirror corrects the on-axis (field-centre) wavefront; off-axis field points keep the difference.
+- a plain light-field camera: :func:`plain_lightfield`, the same simulation with a 1 × 1 scan.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+
+__all__ = ["SegmentedMirror", "zernike_wavefront", "plain_lightfield"]
+
+
+def zernike_wavefront(z) -> Callable[[np.ndarray, np.ndarray], np.ndarray] | None:
+    """Callable ``W(rho_x, rho_y)`` [waves] of a Noll vector (None → None)."""
+    if z is None:
+        return None
+    from metasensor.optics.zernike import wavefront
+
+    z = np.asarray(z, dtype=np.float64)
+    return lambda x, y: np.asarray(wavefront(z, np.asarray(x, float), np.asarray(y, float)))
+
+
+class SegmentedMirror:
+    """Least-squares per-segment piston/tip/tilt fit of a wavefront over an annular pupil.
+
+    ``segments`` per axis tile the square [−1, 1]² of normalised pupil coordinates; the fit uses
+    ``samples`` points per segment side, inside ``obstruction <= |rho| <= 1``. Segments holding
+    fewer than 3 pupil samples fit piston only.
+    """
+
+    def __init__(self, segments: int = 15, obstruction: float = 0.0, samples: int = 12):
+        if not (isinstance(segments, int) and segments >= 1):
+            raise ValueError(f"segments must be a positive integer, got {segments!r}")
+        self.segments, self.obstruction, self.samples = segments, float(obstruction), samples
+        m = segments * samples
+        g = -1.0 + (np.arange(m) + 0.5) * 2.0 / m
+        self.x, self.y = np.meshgrid(g, g)  # x along columns, y along rows
+        r = np.hypot(self.x, self.y)
+        self.inside = (r <= 1.0) & (r >= self.obstruction)
+
+    def segment_index(self, rho_x, rho_y) -> tuple[np.ndarray, np.ndarray]:
+        n = self.segments
+        sy = np.clip(np.floor((np.asarray(rho_y) + 1.0) * n / 2.0), 0, n - 1).astype(int)
+        sx = np.clip(np.floor((np.asarray(rho_x) + 1.0) * n / 2.0), 0, n - 1).astype(int)
+        return sy, sx
+
+    def fit(self, wavefront: Callable) -> np.ndarray:
+        """Per-segment coefficients (segments, segments, 3): piston, tip (x), tilt (y)."""
+        n, s = self.segments, self.samples
+        w = np.asarray(wavefront(self.x, self.y), dtype=np.float64)
+        coef = np.zeros((n, n, 3))
+        for i in range(n):
+            for j in range(n):
+                sl = (slice(i * s, (i + 1) * s), slice(j * s, (j + 1) * s))
+                keep = self.inside[sl]
+                if not keep.any():
+                    continue
+                xs, ys, ws = self.x[sl][keep], self.y[sl][keep], w[sl][keep]
+                if keep.sum() < 3:
+                    coef[i, j, 0] = ws.mean()
+                    continue
+                a = np.stack([np.ones_like(xs), xs, ys], axis=1)
+                coef[i, j] = np.linalg.lstsq(a, ws, rcond=None)[0]
+        return coef
+
+    def correction(self, wavefront: Callable) -> Callable:
+        """Callable ``D(rho_x, rho_y)``: the mirror's surface (in waves of wavefront)."""
+        coef = self.fit(wavefront)
+
+        def mirror(rho_x, rho_y):
+            rx, ry = np.broadcast_arrays(np.asarray(rho_x, float), np.asarray(rho_y, float))
+            sy, sx = self.segment_index(rx, ry)
+            c = coef[sy, sx]
+            return c[..., 0] + c[..., 1] * rx + c[..., 2] * ry
+
+        return mirror
+
+    def residual(self, wavefront: Callable, corrected: Callable | None = None) -> Callable:
+        """Callable residual ``W − D`` where D is fitted to ``corrected`` (default: W itself)."""
+        mirror = self.correction(wavefront if corrected is None else corrected)
+        return lambda x, y: np.asarray(wavefront(x, y), dtype=np.float64) - mirror(x, y)
+
+    def rms(self, wavefront: Callable) -> float:
+        """R.m.s. [waves] of ``wavefront`` over the pupil (piston removed)."""
+        w = np.asarray(wavefront(self.x, self.y), dtype=np.float64)[self.inside]
+        return float(np.sqrt(np.mean((w - w.mean()) ** 2)))
+
+
+def plain_lightfield(scene, cap, **kwargs):
+    """A plain light-field camera (1 × 1 scan) with the optics, aberrations, dynamics, photon
+    budget (gain, read noise, bit depth) and intensity scale of an existing capture ``cap``.
+
+    Its views sample the field every ``nnum`` pixels; note that its ``truth`` grid starts at
+    sensor pixel 0 (offset ``(nnum − nnum) // 2``), not at ``cap``'s offset.
+    """
+    from metasensor.simulate.capture import simulate
+
+    opts = dict(cap.options)
+    opts.update(scan=1, scan_order=None, scale=cap.scale, snr_db=None,
+                photons=cap.noise.photons, comparison=False)
+    opts.update(kwargs)
+    return simulate(scene, cap.config.replace(scan=cap.config.scan), **opts)

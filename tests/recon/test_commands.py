@@ -1,0 +1,75 @@
+"""``metasensor reconstruct`` CLI: outputs, PSF file, errors; inputs never modified."""
+
+import hashlib
+import json
+
+import h5py
+import numpy as np
+import pytest
+import tifffile
+from recon_standin import gaussian_psfs, synth_views
+from typer.testing import CliRunner
+
+from metasensor.cli import app
+from metasensor.config import SystemConfig
+from metasensor.io.views import write_views
+from metasensor.recon.commands import parse_zernike, read_psf_file
+
+CFG = SystemConfig(nnum=5, scan=5)
+
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("rec")
+    rng = np.random.default_rng(2)
+    bank = gaussian_psfs(nnum=5, radius=4)
+    views, _ = synth_views(0.5 + rng.random((60, 60)).astype(np.float32), bank, 1, border=5)
+    write_views(tmp / "views.tif", views, CFG)
+    with h5py.File(tmp / "psf.h5", "w") as f:
+        f.create_dataset("psf", data=bank)
+        f.attrs["config"] = CFG.to_json()
+    CFG.to_toml(tmp / "cfg.toml")
+    return tmp
+
+
+def test_reconstruct_cli_writes_image_and_figure(files):
+    before = hashlib.sha256((files / "views.tif").read_bytes()).hexdigest()
+    out = files / "out"
+    res = CliRunner().invoke(app, ["reconstruct", str(files / "views.tif"), "--psf",
+                                   str(files / "psf.h5"), "--blocks", "2x2", "--overlap", "6",
+                                   "--iterations", "2", "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    img = tifffile.imread(out / "image.tif")
+    assert img.shape == (50, 50) and img.dtype == np.float32 and np.isfinite(img).all()
+    assert (out / "reconstruction.png").stat().st_size > 1000
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["blocks"] == [2, 2] and len(summary["history"][0][0]) == 2
+    assert np.load(out / "zernike.npy").shape == (2, 2, 45)
+    assert hashlib.sha256((files / "views.tif").read_bytes()).hexdigest() == before
+
+
+def test_cli_errors(files):
+    runner = CliRunner()
+    res = runner.invoke(app, ["reconstruct", str(files / "nope.tif"), "--out", str(files / "o")])
+    assert res.exit_code != 0 and "not found" in str(res.exception)
+    views, psf = str(files / "views.tif"), str(files / "psf.h5")
+    res = runner.invoke(app, ["reconstruct", views, "--psf", psf,
+                              "--config", str(files / "cfg.toml"), "--out", str(files / "o")])
+    assert res.exit_code != 0 and "either" in str(res.exception)
+    res = runner.invoke(app, ["reconstruct", views, "--psf", psf,
+                              "--blocks", "4by4", "--out", str(files / "o")])
+    assert res.exit_code != 0 and "--blocks" in str(res.exception)
+    res = runner.invoke(app, ["reconstruct", "--help"])
+    assert res.exit_code == 0 and "Example" in res.output
+
+
+def test_psf_file_and_zernike_parsing(files):
+    bank, cfg = read_psf_file(files / "psf.h5")
+    assert bank.shape == (5, 5, 9, 9) and cfg == CFG
+    z = parse_zernike("4:0.5,7:-0.2")
+    assert z[3] == 0.5 and z[6] == -0.2 and z.size == 45
+    with pytest.raises(ValueError, match="noll:waves"):
+        parse_zernike("4=0.5")
+    (files / "bad.h5").write_bytes(b"not hdf5")
+    with pytest.raises(ValueError, match="HDF5"):
+        read_psf_file(files / "bad.h5")
