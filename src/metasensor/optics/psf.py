@@ -197,7 +197,7 @@ def view_psfs(cfg: SystemConfig, zernike=None, depth: float = 0.0, *,
         light, see the module docstring).
     device : torch device (None: CUDA if available, else CPU).
     cache : True (default cache folder, see :mod:`metasensor.optics.cache`), False (bypass) or
-        a folder path. The key hashes the code version, ``cfg.digest()``, the pupil amplitude
+        a folder path. The key hashes the code version, ``cfg.optical_digest()`` (PSFs do not depend on the scan), the pupil amplitude
         and wavefront evaluated on a fixed 257² grid, depth, subsample, size and oversample.
     oversample : simulation samples per pixel per axis (odd multiple of subsample; default >= 3).
     """
@@ -214,7 +214,7 @@ def view_psfs(cfg: SystemConfig, zernike=None, depth: float = 0.0, *,
     folder = None if cache is True or cache is False else Path(cache)
     key = None
     if cache is not False:
-        key = _cache.cache_key(PSF_CODE_VERSION, "view_psfs", cfg.digest(),
+        key = _cache.cache_key(PSF_CODE_VERSION, "view_psfs", cfg.optical_digest(),
                                a_ref.astype(np.float32), w_ref.astype(np.float32), depth, sub,
                                size, os_)
         hit = _cache.load(key, folder)
