@@ -197,8 +197,9 @@ def view_psfs(cfg: SystemConfig, zernike=None, depth: float = 0.0, *,
         light, see the module docstring).
     device : torch device (None: CUDA if available, else CPU).
     cache : True (default cache folder, see :mod:`metasensor.optics.cache`), False (bypass) or
-        a folder path. The key hashes the code version, ``cfg.optical_digest()`` (PSFs do not depend on the scan), the pupil amplitude
-        and wavefront evaluated on a fixed 257² grid, depth, subsample, size and oversample.
+        a folder path. The key hashes the code version, ``cfg.optical_digest()`` (not the scan),
+        the pupil amplitude and wavefront evaluated on a fixed 257² grid, depth, subsample, size
+        and oversample.
     oversample : simulation samples per pixel per axis (odd multiple of subsample; default >= 3).
     """
     z = _check_zernike(zernike)
