@@ -36,7 +36,7 @@ def calibrated():
     truth = np.stack([np.stack([random_zernike(0.3, modes=range(4, 16), seed=10 * i + j)
                                 for j in range(2)]) for i in range(2)])
     views = _field_views(CFG, truth, 72)
-    sa = calibrate_system(views, CFG, blocks=(2, 2), grid=(6, 6), iterations=120)
+    sa = calibrate_system(views, CFG, blocks=(2, 2), grid=(6, 6), iterations=60)
     return truth, views, sa
 
 
