@@ -106,19 +106,28 @@ def reconstruct_block(task: BlockTask) -> BlockResult:
         raise ValueError(f"views contain NaN or infinite values in block {task.block.index}")
     zernike = np.asarray(task.zernike, dtype=np.float32)
     dao_history: list[float] = []
+    bank = task.psf
     if task.method in ("wave", "geometric"):
-        from metasensor.recon.dao import estimate_block_aberration
+        import importlib
 
+        dao = importlib.import_module("metasensor.recon.dao")  # lazily: the DAO stage's module
         init = zernike if np.any(zernike) else None
-        z_est, dao_history = estimate_block_aberration(window, cfg, method=task.method, init=init,
-                                                       device=task.device, **task.dao_kwargs)
+        geometric_bank = (task.method == "geometric" and bank is None and task.psf_fn is None
+                          and hasattr(dao, "run_dao") and hasattr(dao, "block_psfs"))
+        if geometric_bank:  # ideal PSFs translated by the measured shifts (never reshaped)
+            res = dao.run_dao(window, cfg, method="geometric", init=init, device=task.device,
+                              **task.dao_kwargs)
+            z_est, dao_history = res.zernike, res.history
+            bank = dao.block_psfs(cfg, res, device=task.device)
+        else:
+            z_est, dao_history = dao.estimate_block_aberration(
+                window, cfg, method=task.method, init=init, device=task.device,
+                **task.dao_kwargs)
         z_est = np.asarray(z_est, dtype=np.float32).ravel()
         zernike = np.zeros(max(zernike.size, z_est.size), np.float32)
         zernike[:z_est.size] = z_est
         dao_history = [float(h) for h in dao_history]
-    if task.psf is not None:
-        bank = task.psf
-    else:
+    if bank is None:
         bank = (task.psf_fn or _default_psfs)(cfg, zernike, task.device)
     bank = np.asarray(bank, dtype=np.float32)
     if bank.ndim != 4 or bank.shape[:2] != (cfg.nnum, cfg.nnum):
