@@ -54,7 +54,7 @@ class BlockTask:
 
     block: Block
     cfg: SystemConfig
-    views: Any  # the full view stack (NumPy or zarr), sliced lazily in the worker
+    views: Any  # the full view stack (NumPy or zarr, sliced lazily in the worker) or the window
     uv: list[tuple[int, int]]
     zernike: np.ndarray
     psf: np.ndarray | None
@@ -66,6 +66,7 @@ class BlockTask:
     pad: bool = True
     dao_kwargs: dict = field(default_factory=dict)
     progress: Any = None  # callable(n) for local runs only
+    windowed: bool = False  # ``views`` already holds just this block's window
 
 
 @dataclass
@@ -101,7 +102,8 @@ def reconstruct_block(task: BlockTask) -> BlockResult:
 
     cfg = task.cfg
     d = cfg.scan_step_px
-    window = _window(task.views, task.block, d)
+    window = (np.asarray(task.views, dtype=np.float32) if task.windowed
+              else _window(task.views, task.block, d))
     if not np.isfinite(window).all():
         raise ValueError(f"views contain NaN or infinite values in block {task.block.index}")
     zernike = np.asarray(task.zernike, dtype=np.float32)
@@ -230,8 +232,11 @@ def reconstruct(views, cfg: SystemConfig, method: str = "isa", zernike=None, fie
         bar = tqdm(total=len(block_list) * iterations, desc="reconstruct", unit="it")
     local = scheduler is None or scheduler in ("threads", "sync")
     tick = bar.update if (bar is not None and local) else None
-    tasks = [BlockTask(b, cfg, views, uv, zern[b.index], psf, psf_fn, method, iterations,
-                       n_subsets, dev, pad, dict(dao_kwargs or {}), tick)
+    # a remote cluster gets each block's window of an in-memory stack, not the whole stack
+    ship = not local and isinstance(views, np.ndarray)
+    tasks = [BlockTask(b, cfg, _window(views, b, d) if ship else views, uv, zern[b.index], psf,
+                       psf_fn, method, iterations, n_subsets, dev, pad, dict(dao_kwargs or {}),
+                       tick, ship)
              for b in block_list]
     stitcher = Stitcher(shape, out)
     history = [[[] for _ in range(bx)] for _ in range(by)]
