@@ -35,6 +35,7 @@ __all__ = ["EdgeMTF", "slanted_edge_mtf", "measure_edge", "mtf50", "mtf_at", "ch
 
 _WINDOWS = ("hamming", "tukey", "none")
 TAIL_CORE = 2.5  # LSF core kept unsmoothed: this many 10-90 % edge widths each side
+MAX_REACH = 48.0  # pixels of the LSF kept each side of the edge (at least 10 edge widths)
 TAIL_TAPER = 0.5  # blend from core to smoothed tails over this fraction of the core
 
 
@@ -330,6 +331,10 @@ def measure_edge(image, roi=None, *, oversample: int = 4, window: str = "hamming
     lsf = np.diff(esf)
     lsf = lsf * np.sign(lsf.sum())
     mid, width = _lsf_centre_width(esf * np.sign(esf[-1] - esf[0]), oversample)
+    # far from the edge the ESF holds only noise: keep max(MAX_REACH px, 10 edge widths) a side
+    reach = max(MAX_REACH * oversample, 10.0 * width)
+    lo_b, hi_b = max(0, int(mid - reach)), min(lsf.size, int(math.ceil(mid + reach)) + 1)
+    lsf, mid = lsf[lo_b:hi_b], mid - lo_b
     if tail_smoothing:
         lsf = _smooth_tails(lsf, mid, max(TAIL_CORE * width, 4.0 * oversample), oversample)
     half = max(mid, lsf.size - 1 - mid)
