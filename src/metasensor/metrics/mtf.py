@@ -10,13 +10,20 @@ writes it out (after Burns' ``sfrmat3``/``sfrmat4``):
    the fitted line. The rows are trimmed to a whole number of phase cycles of the slant.
 3. Projection: every pixel centre is projected onto the edge **normal** (signed distance
    ``(x - x_edge(row)) * cos(theta)``, theta = edge angle) and averaged into bins of width
-   ``1 / oversample`` pixel: the oversampled edge-spread function (ESF). Empty bins are linearly
-   interpolated.
-4. Line-spread function (LSF) = first difference of the ESF; a Hamming (or Tukey / no) window
-   centred on the LSF centroid; FFT; modulus normalised to 1 at zero frequency.
+   ``1 / oversample`` pixel: the oversampled edge-spread function (ESF). Each bin's mean is placed
+   at the mean position of its samples and interpolated back to the bin centres (uneven phase
+   filling at some tilts would otherwise ripple the MTF); empty bins are interpolated.
+4. Line-spread function (LSF) = first difference of the ESF, kept within
+   ``max(48 px, 10 edge widths)`` of the edge; a Hamming (or Tukey / no) window centred on the
+   edge; FFT; modulus normalised to 1 at zero frequency.
 5. Corrections: the two-point difference has the transfer ``sinc(f * delta)`` (ISO 12233 divides by
    it); averaging the pixels into bins of width ``delta`` is a box filter of the same width and
    transfer, which is divided out too (``correct_binning=True``; ISO's sfrmat does not).
+
+Beyond ISO 12233 (for noisy images, ``tail_smoothing=True``): the LSF tails beyond 2.5 edge
+widths (10-90 %) are low-passed (Gaussian, one pixel) before the FFT; this removes most of the
+high-frequency noise of the flat parts of the ESF and keeps the tails' area, so MTF[0] and the
+low frequencies stay unbiased.
 
 Frequencies are in cycles per pixel **along the edge normal**. For a rotationally symmetric PSF
 this is the radial MTF of the optics times the pixel-aperture transfer along that direction,
