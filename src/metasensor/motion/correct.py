@@ -44,8 +44,9 @@ def _resolve(scan_order, reference, shape) -> tuple[list[tuple[int, int]], int, 
     ref = n // 2 if reference is None else reference
     if not isinstance(ref, (int, np.integer)) or not 0 <= ref < n:
         raise ValueError(f"reference must be an index into scan_order (0..{n - 1}), got {ref!r}")
-    if shape[0] < 4 * p or shape[1] < 4 * p:
-        raise ValueError(f"view of shape {shape} is too small for scan period {p}")
+    if shape[0] < 12 * p or shape[1] < 12 * p:  # the flow needs sub-images of >= 12 x 12
+        raise ValueError(f"view of shape {shape} is too small for scan period {p} "
+                         f"(needs at least {12 * p} x {12 * p})")
     return order, p, int(ref)
 
 
@@ -76,7 +77,13 @@ def estimate_motion(view: np.ndarray, scan_order, reference: int | None = None,
     m = ndimage.gaussian_filter(m, (0, 0, smooth, smooth)) if smooth > 0 else m
     conf = motion_confidence(view, order, ref, m) if max_ratio < 1 else None
     m = suppress_static(m, threshold=threshold, confidence=conf, max_ratio=max_ratio)
-    dense = np.zeros((2, *view.shape), np.float32)
+    return _dense(m, order, view.shape)
+
+
+def _dense(m: np.ndarray, order, shape) -> np.ndarray:
+    """Per-frame motion on the sub-image grids ``(T, 2, h, w)`` → dense field ``(2, H, W)``."""
+    p = period_of(order)
+    dense = np.zeros((2, *shape), np.float32)
     h, w = m.shape[-2:]
     for t, (r, c) in enumerate(order):
         dense[:, r::p, c::p][:, :h, :w] = m[t]
@@ -91,11 +98,14 @@ class MotionPlan:
     old or new position); every other pixel keeps its value.
     """
 
-    def __init__(self, motion: np.ndarray, period: int, scatter: str = "linear"):
+    def __init__(self, motion: np.ndarray, period: int, scatter: str = "linear",
+                 drop: np.ndarray | None = None):
         motion = np.asarray(motion, np.float32)
         _, h, w = motion.shape
         self.shape = (h, w)
         moved = np.any(motion != 0, axis=0)
+        if drop is not None:  # samples left out (their neighbourhood is re-interpolated)
+            moved = moved | drop
         self.empty = not moved.any()
         if self.empty:
             return
@@ -103,7 +113,7 @@ class MotionPlan:
         qy, qx = yy + motion[0], xx + motion[1]
         margin = 2 * period
         keep = (qy > -margin) & (qy < h - 1 + margin) & (qx > -margin) & (qx < w - 1 + margin)
-        moved_in = moved & keep
+        moved_in = moved & keep if drop is None else moved & keep & ~drop
         landing = np.zeros((h, w), bool)
         ly = np.clip(np.rint(qy[moved_in]).astype(int), 0, h - 1)
         lx = np.clip(np.rint(qx[moved_in]).astype(int), 0, w - 1)
@@ -111,7 +121,7 @@ class MotionPlan:
         box = np.ones((2 * period + 1, 2 * period + 1), bool)
         self.affected = ndimage.binary_dilation(moved | landing, box)
         context = ndimage.binary_dilation(self.affected, box, iterations=2)
-        used = (moved_in | (context & ~moved))
+        used = moved_in | (context & ~moved)
         self.used = np.nonzero(used.ravel())[0]
         points = np.column_stack([qy.ravel()[self.used], qx.ravel()[self.used]])
         self.query = np.nonzero(self.affected.ravel())[0]
