@@ -150,3 +150,18 @@ def test_linear_scatter_as_good_as_cubic_griddata():
     lin = psnr(correct_motion(view, ORDER, scatter="linear"), truth, INNER)
     cub = psnr(correct_motion(view, ORDER, scatter="cubic"), truth, INNER)
     assert lin >= cub - 0.5, (lin, cub)
+
+
+@pytest.mark.parametrize("order_name,reference", [("serpentine", None), ("row-major", 0)])
+def test_other_scan_order_and_reference(order_name, reference):
+    """Serpentine acquisition order, and alignment to the first frame instead of the middle."""
+    from metasensor.sensor.scan import scan_order
+
+    order = scan_order(P, order_name)
+    ref = len(order) // 2 if reference is None else reference
+    view, truth = dynamic_view(scene(0), 2, SHAPE, order, rigid_motion((1.0, 0.6), ref),
+                               reference=ref)
+    out = correct_motion(view, order_name if reference is None else order, reference=reference)
+    gain = psnr(out, truth, INNER) - psnr(view, truth, INNER)
+    assert gain >= 6.0, gain
+    _assert_artifact_drop(view, out, truth, CROP, 10.0)

@@ -34,11 +34,13 @@ __all__ = ["correct_motion", "correct_motion_views", "correct_motion_sequence",
 
 
 def _resolve(scan_order, reference, shape) -> tuple[list[tuple[int, int]], int, int]:
-    if scan_order is None:
-        raise ValueError("scan_order is required (a list of (row, col) phases or a preset name)")
-    if isinstance(scan_order, str):
-        raise ValueError("scan_order given by name needs a period: pass the list of phases")
-    order = check_scan_order(scan_order, period_of(scan_order))
+    if scan_order is None or isinstance(scan_order, str):
+        # None = row-major (interface.md); a preset name; period: the default configuration's
+        from metasensor.config import SystemConfig
+
+        order = check_scan_order(scan_order, SystemConfig().scan)
+    else:
+        order = check_scan_order(scan_order, period_of(scan_order))
     p = period_of(order)
     n = len(order)
     ref = n // 2 if reference is None else reference
@@ -143,14 +145,17 @@ class MotionPlan:
         return out[0] if single else out
 
 
-def correct_motion(view_image: np.ndarray, scan_order: Sequence, reference: int | None = None,
+def correct_motion(view_image: np.ndarray, scan_order: Sequence | str | None,
+                   reference: int | None = None,
                    *, method: str = "dis", scatter: str = "linear", threshold: float = 0.5,
                    smooth: float = 1.0, max_ratio: float = 0.5,
                    motion: np.ndarray | None = None) -> np.ndarray:
     """Remove the scan artefacts of moving objects from one realigned view (interface.md).
 
     view_image: ``(H, W)``, sample (y, x) taken at frame ``scan_order.index((y % p, x % p))``;
-    reference: index into scan_order of the time to align to (default: the middle one).
+    scan_order: list of (row, col) phases (period = sqrt of its length), or None (row-major) /
+    "row-major" / "serpentine" with the default configuration's period (5); reference: index
+    into scan_order of the time to align to (default: the middle one).
     method: optical flow "dis" (default) / "farneback", or "registration" (turbulence);
     scatter: "cubic" (Clough–Tocher, as the paper) or "linear"; threshold: motions below this
     (view px) are flow noise and ignored, as are motions that do not lower the warping residual
