@@ -22,7 +22,7 @@ import numpy as np
 from scipy import ndimage
 
 __all__ = ["sub_images", "phase_flows", "registration_flows", "suppress_static",
-           "motion_confidence"]
+           "motion_confidence", "occlusions"]
 
 
 def sub_images(view: np.ndarray, order: list[tuple[int, int]]) -> list[np.ndarray]:
@@ -84,6 +84,39 @@ def phase_flows(view: np.ndarray, order: list[tuple[int, int]], reference: int,
         motion[t, 0] = p * f[..., 1] - (r - r0)
         motion[t, 1] = p * f[..., 0] - (c - c0)
     return motion
+
+
+def occlusions(view: np.ndarray, order: list[tuple[int, int]], reference: int,
+               motion: np.ndarray, method: str = "dis", tol: float = 1.5) -> np.ndarray:
+    """Forward–backward consistency of the flow: ``(T, h, w)`` True where a sample of frame k
+    has no consistent counterpart at the reference time (occluded or uncovered by a moving
+    object). The backward flow b (reference → frame k) taken at the forward target
+    ``x + g(x)`` must cancel the forward flow g: ``p·|g(x) + b(x + g(x))| <= tol`` view px."""
+    import cv2
+
+    p = int(round(len(order) ** 0.5))
+    subs = sub_images(np.asarray(view, np.float32), order)
+    lo, hi = np.percentile(view, [0.5, 99.5])
+    u8 = [_to_u8(s, lo, hi) for s in subs]
+    h, w = subs[0].shape
+    yy, xx = np.mgrid[0:h, 0:w].astype(np.float32)
+    r0, c0 = order[reference]
+    calc = _engine(method)
+    occ = np.zeros((len(order), h, w), bool)
+    for t in range(len(order)):
+        if t == reference:
+            continue
+        r, c = order[t]
+        gy = (motion[t, 0] + (r - r0)) / p
+        gx = (motion[t, 1] + (c - c0)) / p
+        init = -np.stack([gx, gy], -1)
+        b = calc(u8[reference], u8[t], np.ascontiguousarray(init, np.float32))
+        by = cv2.remap(b[..., 1], xx + gx, yy + gy, cv2.INTER_LINEAR,
+                       borderMode=cv2.BORDER_REPLICATE)
+        bx = cv2.remap(b[..., 0], xx + gx, yy + gy, cv2.INTER_LINEAR,
+                       borderMode=cv2.BORDER_REPLICATE)
+        occ[t] = p * np.hypot(gy + by, gx + bx) > tol
+    return occ
 
 
 @contextlib.contextmanager
