@@ -165,3 +165,18 @@ def test_other_scan_order_and_reference(order_name, reference):
     gain = psnr(out, truth, INNER) - psnr(view, truth, INNER)
     assert gain >= 6.0, gain
     _assert_artifact_drop(view, out, truth, CROP, 10.0)
+
+
+def test_view_size_not_a_multiple_of_the_period():
+    """Samples in the last rows/columns (beyond the common sub-image size) move too."""
+    from metasensor.motion.synthetic import natural_scene
+
+    shape = (203, 198)
+    sc = natural_scene(shape, 2, 1.0, seed=0)
+    view, truth = dynamic_view(sc, 2, shape, ORDER, rigid_motion((1.0, 0.6), REF))
+    out = correct_motion(view, ORDER)
+    edge = np.zeros(shape, bool)
+    edge[185:195, 20:180] = True  # bottom rows, away from the border itself
+    assert psnr(out, truth, edge) - psnr(view, truth, edge) >= 6.0
+    static, _ = dynamic_view(sc, 2, shape, ORDER, rigid_motion((0, 0), REF))
+    np.testing.assert_array_equal(correct_motion(static, ORDER), static)

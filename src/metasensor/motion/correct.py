@@ -98,7 +98,10 @@ def _dense(m: np.ndarray, order, shape) -> np.ndarray:
     dense = np.zeros((2, *shape), np.float32)
     h, w = m.shape[-2:]
     for t, (r, c) in enumerate(order):
-        dense[:, r::p, c::p][:, :h, :w] = m[t]
+        tgt = dense[:, r::p, c::p]  # samples beyond the common sub-image size: nearest row/col
+        iy = np.minimum(np.arange(tgt.shape[1]), h - 1)
+        ix = np.minimum(np.arange(tgt.shape[2]), w - 1)
+        tgt[...] = m[t][:, iy][:, :, ix]
     return dense
 
 
