@@ -109,7 +109,7 @@ def view_psfs(cfg, zernike=None, depth=0.0, *, phase=None, amplitude=None, subsa
             xx2 = d[None, :] - dx[a, b]
             rr = np.hypot(yy2, xx2)
             edge = 0.5 * (1 - special.erf((rr - n / 2) / (0.5 * math.sqrt(2))))
-            out[a, b] = share[a, b] * edge
+            out[a, b] = share[a, b] * edge / subsample**2  # view_psfs normalisation
     return out
 
 

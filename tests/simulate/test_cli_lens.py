@@ -21,7 +21,7 @@ def _run(args):
     return CliRunner().invoke(app, (["simulate"] if group else []) + args)
 
 
-def test_cli_writes_a_capture(tmp_path):
+def test_cli_writes_a_capture(tmp_path, standin):
     out = tmp_path / "cap"
     res = _run(["--scene", "chart", "--size", "132", "--scan",
                                    "3", "--snr", "25", "--zernike", "4:0.3,6:0.2", "--out",
@@ -43,7 +43,7 @@ def test_cli_writes_a_capture(tmp_path):
     assert abs(meta["snr_db"] - 25) < 0.5
 
 
-def test_cli_bad_input(tmp_path):
+def test_cli_bad_input(tmp_path, standin):
     res = _run(["--scene", "nope", "--size", "64", "--out",
                                    str(tmp_path)])
     assert res.exit_code != 0 and "unknown scene" in str(res.exception)

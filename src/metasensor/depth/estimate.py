@@ -85,7 +85,8 @@ def estimate_depth(views, cfg: SystemConfig, calibration=None, *, candidates: in
                    disparity_range: tuple[float, float] | None = None,
                    view_mask: np.ndarray | None = None, cost: str = "variance",
                    occlusion: bool = True, radius: int = 4, eps: float = 0.01,
-                   refine_iterations: int = 2, fill: bool = False, normalize: bool = True,
+                   refine_iterations: int = 2, fill: bool = True, fill_threshold: float = 0.1,
+                   fill_radius: int = 16, normalize: bool = True,
                    focal_length: float | None = None, focus_distance: float | None = None,
                    device=None, progress: bool = False) -> DepthResult:
     """Disparity, confidence and depth from views ``(nnum, nnum, H, W)`` (or a ``Capture``).
@@ -99,7 +100,8 @@ def estimate_depth(views, cfg: SystemConfig, calibration=None, *, candidates: in
         contain the centre view. ``cost``: ``"variance"`` or ``"sad"``; ``occlusion``: half-pupil
         occlusion handling. ``radius`` [view px] and ``eps`` (relative to the guide's variance) of
         the guided cost aggregation. ``refine_iterations``: Gauss–Newton steps (0 = parabola fit
-        only). ``fill``: confidence-weighted edge-aware filling of weak pixels.
+        only). ``fill``: replace pixels with confidence below ``fill_threshold`` by an
+        edge-aware, confidence-weighted average of the confident ones within ``fill_radius``.
     focal_length, focus_distance : main-lens geometry [m] overriding the config's.
     """
     if not isinstance(cfg, SystemConfig):
@@ -148,7 +150,8 @@ def estimate_depth(views, cfg: SystemConfig, calibration=None, *, candidates: in
                                        occlusion=occlusion)
             disp = torch.clamp(disp, float(cands[0]), float(cands[-1]))
         if fill:
-            disp = fill_low_confidence(disp, conf, guide, radius=3 * radius, eps=eps)
+            disp = fill_low_confidence(disp, conf, guide, radius=fill_radius,
+                                       threshold=fill_threshold, eps=eps)
         disparity = to_numpy(disp).astype(np.float32)
         confidence = to_numpy(conf).astype(np.float32)
     z = geometry.disparity_to_image_depth(disparity, cfg).astype(np.float32)

@@ -147,8 +147,11 @@ def render_views(texture: np.ndarray, layers: list[Layer], cfg: SystemConfig,
         alpha = np.clip(np.asarray(layer.alpha, dtype=np.float64), 0, 1)
         if alpha.shape != texture.shape:
             raise ValueError(f"layer alpha shape {alpha.shape} != texture {texture.shape}")
-        col = ndimage.convolve(texture * alpha, kern, mode="reflect")
-        alp = ndimage.convolve(alpha, kern, mode="reflect")
+        # blurred colour and opacity, spline-prefiltered once (sampled below with prefilter off)
+        col = ndimage.spline_filter(ndimage.convolve(texture * alpha, kern, mode="reflect"),
+                                    order=3, mode="mirror")
+        alp = ndimage.spline_filter(ndimage.convolve(alpha, kern, mode="reflect"), order=3,
+                                    mode="mirror")
         disp = layer.disparity
         disp_map = None if np.isscalar(disp) else np.asarray(disp, dtype=np.float64)
         prepared.append((col, alp, float(disp) if disp_map is None else None, disp_map))
@@ -173,8 +176,10 @@ def render_views(texture: np.ndarray, layers: list[Layer], cfg: SystemConfig,
                         dq = ndimage.map_coordinates(dmap, [ey, ex], order=1, mode="nearest")
                         ey, ex = qy - dq * (u - c), qx - dq * (v - c)
                     qy, qx = ey, ex
-                cv = ndimage.map_coordinates(col, [qy, qx], order=3, mode="reflect")
-                av = ndimage.map_coordinates(alp, [qy, qx], order=3, mode="reflect")
+                cv = ndimage.map_coordinates(col, [qy, qx], order=3, mode="mirror",
+                                             prefilter=False)
+                av = ndimage.map_coordinates(alp, [qy, qx], order=3, mode="mirror",
+                                             prefilter=False)
                 out = out * (1 - np.clip(av, 0, 1)) + cv
             views[u, v] = out
     # truth: the front-most opaque layer at each centre-view sample

@@ -21,6 +21,7 @@ __all__ = ["find_edge_rois", "field_mtf", "FieldMTF", "field_radius"]
 
 CENTRE_RADIUS = 1.0 / 3.0  # normalised field radius up to which an ROI counts as "centre"
 EDGE_RADIUS = 2.0 / 3.0  # ... and from which it counts as "edge"
+GROUP_SPAN = 0.1  # if no ROI is that central (or peripheral): those within this of the extreme
 
 
 def field_radius(y: float, x: float, shape: tuple[int, int]) -> float:
@@ -144,8 +145,12 @@ class FieldMTF:
     pixel_pitch: float | None = None
 
     def summary(self) -> dict:
-        """MTF50 at the field centre and edge (medians over ROIs with radius <= 1/3, >= 2/3;
-        if a group is empty, the ROI nearest to the centre / farthest from it) and their ratio."""
+        """MTF50 at the field centre and edge and their ratio (edge / centre).
+
+        Medians over the ROIs with normalised radius <= 1/3 (centre) and >= 2/3 (edge); where a
+        group is empty (e.g. a chart with a star in the middle), over the ROIs within 0.1 of the
+        smallest (largest) measured radius. ``centre_radius`` / ``edge_radius`` say where.
+        """
         ok = np.isfinite(self.mtf50)
         out: dict = {"n_rois": int(len(self.mtf50)), "n_measured": int(ok.sum())}
         if not ok.any():
@@ -153,11 +158,12 @@ class FieldMTF:
                        edge_over_centre=float("nan"))
             return out
         r, v = self.radius[ok], self.mtf50[ok]
-        c = v[r <= CENTRE_RADIUS] if np.any(r <= CENTRE_RADIUS) else v[[np.argmin(r)]]
-        e = v[r >= EDGE_RADIUS] if np.any(r >= EDGE_RADIUS) else v[[np.argmax(r)]]
-        out.update(centre_mtf50=float(np.median(c)), edge_mtf50=float(np.median(e)),
-                   edge_over_centre=float(np.median(e) / np.median(c)),
-                   centre_radius_max=float(CENTRE_RADIUS), edge_radius_min=float(EDGE_RADIUS))
+        cm = r <= CENTRE_RADIUS if np.any(r <= CENTRE_RADIUS) else r <= r.min() + GROUP_SPAN
+        em = r >= EDGE_RADIUS if np.any(r >= EDGE_RADIUS) else r >= r.max() - GROUP_SPAN
+        out.update(centre_mtf50=float(np.median(v[cm])), edge_mtf50=float(np.median(v[em])),
+                   edge_over_centre=float(np.median(v[em]) / np.median(v[cm])),
+                   centre_radius=float(np.median(r[cm])), edge_radius=float(np.median(r[em])),
+                   n_centre=int(cm.sum()), n_edge=int(em.sum()))
         if self.pixel_pitch is not None:
             k = 1.0 / (self.pixel_pitch * 1e3)
             out.update(centre_mtf50_lpmm=out["centre_mtf50"] * k,
@@ -165,13 +171,20 @@ class FieldMTF:
         return out
 
     def positions(self, n: int = 4) -> list[int]:
-        """Indices of up to ``n`` measured ROIs spread over the field radius (centre to edge)."""
+        """Indices of up to ``n`` measured ROIs at distinct field radii spread from the centre
+        to the edge (the ROI nearest to each of ``n`` evenly spaced target radii)."""
         ok = np.flatnonzero(np.isfinite(self.mtf50))
         if ok.size == 0:
             return []
-        order = ok[np.argsort(self.radius[ok])]
-        pick = np.unique(np.round(np.linspace(0, order.size - 1, min(n, order.size))).astype(int))
-        return [int(order[i]) for i in pick]
+        r = self.radius[ok]
+        picked: list[int] = []
+        for target in np.linspace(r.min(), r.max(), n):
+            free = [i for i in range(ok.size) if not any(
+                abs(r[i] - self.radius[j]) < 0.02 for j in picked)]
+            if not free:
+                break
+            picked.append(int(ok[min(free, key=lambda i: abs(r[i] - target))]))
+        return sorted(picked, key=lambda j: self.radius[j])
 
 
 def field_mtf(image, rois=None, *, reference=None, pixel_pitch: float | None = None,

@@ -34,6 +34,8 @@ import numpy as np
 __all__ = ["EdgeMTF", "slanted_edge_mtf", "measure_edge", "mtf50", "mtf_at", "check_roi"]
 
 _WINDOWS = ("hamming", "tukey", "none")
+TAIL_CORE = 2.5  # LSF core kept unsmoothed: this many 10-90 % edge widths each side
+TAIL_TAPER = 0.5  # blend from core to smoothed tails over this fraction of the core
 
 
 @dataclass(frozen=True)
@@ -204,10 +206,29 @@ def _smooth_tails(lsf: np.ndarray, mid: float, core: float, oversample: int) -> 
     from scipy.ndimage import gaussian_filter1d
 
     x = np.abs(np.arange(lsf.size) - mid)
-    t = np.clip((x - core) / core, 0.0, 1.0)
+    t = np.clip((x - core) / (TAIL_TAPER * core), 0.0, 1.0)
     keep = 0.5 * (1 + np.cos(np.pi * t))
     tail = gaussian_filter1d(lsf * (1 - keep), float(oversample), mode="constant")
     return lsf * keep + tail
+
+
+def _check_straight_edge(a: np.ndarray, c0: float, c1: float, roi) -> None:
+    """Every row must cross the fitted edge with a step of the same sign and similar size
+    (pixels 2-10 px either side of the line); a corner or several edges fail this."""
+    ny, nx = a.shape
+    x = np.arange(nx)[None, :]
+    off = x - (c0 + c1 * np.arange(ny))[:, None]
+    left = (off <= -2) & (off >= -10)
+    right = (off >= 2) & (off <= 10)
+    nl, nr = left.sum(axis=1), right.sum(axis=1)
+    if np.any(nl == 0) or np.any(nr == 0):
+        raise ValueError(f"the edge in roi {roi} leaves the roi: centre it and give it margin")
+    steps = (a * right).sum(axis=1) / nr - (a * left).sum(axis=1) / nl
+    steps = np.convolve(steps, np.ones(3) / 3, mode="valid")
+    typical = np.median(steps)
+    if typical == 0 or np.min(steps / typical) < 0.3:
+        raise ValueError(f"roi {roi} does not hold one straight edge across all its rows "
+                         f"(a corner or several edges?)")
 
 
 def _edge_contrast(a: np.ndarray) -> tuple[float, float]:
@@ -262,6 +283,7 @@ def measure_edge(image, roi=None, *, oversample: int = 4, window: str = "hamming
                          f"the noise {noise:.3g}")
 
     c0, c1 = _fit_edge(a)
+    _check_straight_edge(a, c0, c1, roi)
     ny, nx = a.shape
     angle = math.degrees(math.atan(c1))
     # whole number of phase cycles of the slant (sfrmat3), centred in the ROI
@@ -309,7 +331,7 @@ def measure_edge(image, roi=None, *, oversample: int = 4, window: str = "hamming
     lsf = lsf * np.sign(lsf.sum())
     mid, width = _lsf_centre_width(esf * np.sign(esf[-1] - esf[0]), oversample)
     if tail_smoothing:
-        lsf = _smooth_tails(lsf, mid, max(4.0 * width, 6.0 * oversample), oversample)
+        lsf = _smooth_tails(lsf, mid, max(TAIL_CORE * width, 4.0 * oversample), oversample)
     half = max(mid, lsf.size - 1 - mid)
     lsf_w = lsf * _window(lsf.size, mid, half, window)
 

@@ -114,8 +114,8 @@ def sampled_conv(image: torch.Tensor, kernels: torch.Tensor, rows: Lattice, cols
         kb = kernels[b0:b0 + chunk].to(device=dev, dtype=dt)
         # kernel element e placed at index (e - 2c) mod P: out_circ[m] = conv at window + m + c
         kpad = torch.zeros((kb.shape[0], py, px), device=dev, dtype=dt)
-        kpad[:, :k, :k] = kb
-        kpad = torch.roll(kpad, shifts=(-2 * c, -2 * c), dims=(1, 2))
+        iy = torch.arange(k, device=dev) - 2 * c
+        kpad[:, (iy % py)[:, None], (iy % px)[None, :]] = kb
         spec_k = torch.fft.rfft2(kpad)[:, None, None]  # (B, 1, 1, py, px//2+1)
         del kpad
         m = py // sy
