@@ -82,6 +82,10 @@ def test_batch_and_warp_consistency():
     est = register_nonrigid_batch(np.stack([moving, moving]), refs, grid=(8, 10), iterations=60,
                                   lr=0.1)
     assert est.shape == (2, 2, H, W)
+    # the images are independent: batching them one by one gives the same fields
+    one = register_nonrigid_batch(np.stack([moving, moving]), refs, grid=(8, 10), iterations=60,
+                                  lr=0.1, batch_size=1)
+    np.testing.assert_allclose(one, est, atol=1e-3)
     for k in range(2):
         assert _rms(est[k], fields[k]) < 0.05
         # warping the moving image with the estimate reproduces the reference
