@@ -95,3 +95,15 @@ def test_cli_motion(tmp_path):
     res = CliRunner().invoke(app, ["motion", str(src), "--scan-order", "[(0,0),(0,1)]",
                                    "--out", str(tmp_path / "x.tif")])
     assert res.exit_code != 0 and "scan" in str(res.exception)
+
+
+def test_parse_scan_order():
+    from metasensor.motion.commands import parse_scan_order
+
+    assert parse_scan_order("serpentine", 0)[5] == (1, 4)
+    nine = str([(r, c) for r in range(3) for c in range(3)])
+    assert len(parse_scan_order(nine, 0)) == 9
+    with pytest.raises(ValueError, match="scan"):
+        parse_scan_order("[(0, 0), (0, 1)]", 0)
+    with pytest.raises(ValueError, match="scan-order"):
+        parse_scan_order("[(0, 0), oops]", 5)

@@ -9,8 +9,9 @@ import typer
 
 
 def parse_scan_order(text: str, period: int) -> list[tuple[int, int]]:
-    """``row-major`` / ``serpentine`` / a Python list of (row, col) pairs → checked scan order."""
-    from metasensor.sensor.scan import check_scan_order
+    """``row-major`` / ``serpentine`` / a Python list of (row, col) pairs → checked scan order.
+    ``period`` 0: a list sets its own period (sqrt of its length); names use 5."""
+    from metasensor.sensor.scan import check_scan_order, period_of
 
     text = text.strip()
     if text.startswith("["):
@@ -19,8 +20,10 @@ def parse_scan_order(text: str, period: int) -> list[tuple[int, int]]:
         except (ValueError, SyntaxError):
             raise ValueError(
                 f"--scan-order: cannot parse {text!r} as a list of (row, col)") from None
-        return check_scan_order(order, period)
-    return check_scan_order(text, period)
+        if not isinstance(order, (list, tuple)):
+            raise ValueError(f"--scan-order: {text!r} is not a list of (row, col)")
+        return check_scan_order(order, period or period_of(order))
+    return check_scan_order(text, period or 5)
 
 
 def register(app: typer.Typer) -> None:
@@ -54,7 +57,7 @@ def register(app: typer.Typer) -> None:
 
         cfg = read_config_from_views(views) if Path(views).exists() else None
         stack = np.asarray(read_views(views))
-        p = period or (cfg.scan if cfg is not None else 5)
+        p = period or (cfg.scan if cfg is not None else 0)
         order = parse_scan_order(scan_order, p)
         if flow_view in ("centre", "center"):
             fv = None
