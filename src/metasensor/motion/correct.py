@@ -21,6 +21,7 @@ import numpy as np
 from scipy import ndimage
 
 from metasensor.motion.flow import (
+    _few_threads,
     motion_confidence,
     occlusions,
     phase_flows,
@@ -205,13 +206,14 @@ def correct_motion_views(views: np.ndarray, scan_order: Sequence, reference: int
                          flow_view: tuple[int, int] | str | None = None, *,
                          mode: str = "object", method: str = "dis", scatter: str = "linear",
                          threshold: float = 0.5, smooth: float = 1.0, chunk: int = 8,
-                         progress: bool = True) -> np.ndarray:
+                         workers: int = 2, progress: bool = True) -> np.ndarray:
     """Motion-correct a view stack ``(nnum, nnum, H, W)`` (returns a new float32 stack).
 
     mode "object": one flow, from ``flow_view`` ((u, v); None = centre view; "sharpest"),
     serves every view (the paper), one interpolation plan for all views, applied in chunks of
     ``chunk`` views. mode "turbulence": every view gets its own smooth flow from non-rigid
-    registration. Views that are entirely zero (outside the coded aperture) are left as they are.
+    registration, ``workers`` views at a time in threads. Views that are entirely zero
+    (outside the coded aperture) are left as they are.
     """
     from tqdm.auto import tqdm
 
@@ -240,10 +242,19 @@ def correct_motion_views(views: np.ndarray, scan_order: Sequence, reference: int
         for idx in tqdm(chunks, desc="motion: views", unit="chunk", disable=not progress):
             flat[idx] = plan.apply(flat[idx])
     elif mode == "turbulence":
-        for i in tqdm(live, desc="motion: views", unit="view", disable=not progress):
+        from concurrent.futures import ThreadPoolExecutor
+
+        def one(i):
             m = estimate_motion(flat[i], order, ref, method="registration", threshold=threshold,
                                 smooth=smooth)
             flat[i] = MotionPlan(m, p, scatter=scatter).apply(flat[i])
+
+        # views in parallel threads (torch, OpenCV and the sparse products release the GIL);
+        # one torch thread each, set once here so the threads never race on the setting
+        with _few_threads(None), ThreadPoolExecutor(max(1, workers)) as pool:
+            for _ in tqdm(pool.map(one, live), total=len(live), desc="motion: views",
+                          unit="view", disable=not progress):
+                pass
     else:
         raise ValueError(f"mode must be 'object' or 'turbulence', got {mode!r}")
     return out
