@@ -13,7 +13,7 @@ from metasensor.depth import geometry, synthetic
 from metasensor.depth.evaluate import evaluation_mask, score
 
 CFG = ms.SystemConfig(scan=5)
-SHAPE = (240, 240)  # image pixels → 80 x 80 views at scan 5
+SHAPE = (210, 210)  # image pixels → 70 x 70 views at scan 5
 
 
 @cache
@@ -198,9 +198,9 @@ def test_fill_gives_textureless_regions_the_surrounding_depth():
     # sweep cannot see depth inside it (confidence ~0); filling from the confident surround does
     tex = synthetic.random_texture(SHAPE, seed=6)
     yy, xx = np.mgrid[:SHAPE[0], :SHAPE[1]]
-    tex = np.where((yy - 120) ** 2 + (xx - 120) ** 2 < 45**2, 0.55, tex).astype(np.float32)
+    tex = np.where((yy - 105) ** 2 + (xx - 105) ** 2 < 45**2, 0.55, tex).astype(np.float32)
     sv = synthetic.render_views(tex, [synthetic.Layer(np.ones(SHAPE), 0.9)], CFG, snr_db=30)
-    inner = ((yy - 120) ** 2 + (xx - 120) ** 2 < 30**2)[1::3, 1::3]
+    inner = ((yy - 105) ** 2 + (xx - 105) ** 2 < 30**2)[1::3, 1::3]
     raw = ms.estimate_depth(sv.views, CFG, fill=False)
     filled = ms.estimate_depth(sv.views, CFG, fill=True)
     assert raw.confidence[inner].mean() < 0.2 < raw.confidence[~inner].mean()

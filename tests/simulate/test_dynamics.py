@@ -16,10 +16,10 @@ CFG = ms.SystemConfig(sensor_shape=(132, 132))
 
 def test_each_frame_sees_the_scene_at_its_own_time(standin):
     # frame t's samples must equal a static capture of the scene shifted by (t - t_ref) * v
-    scene = np.random.default_rng(0).random((132, 132)).astype(np.float32)
+    scene = np.random.default_rng(0).random((70, 70)).astype(np.float32)
     motion = Motion(shift=(0.5, -1.0))
     cap = simulate(scene, CFG, scan=3, motion=motion, comparison=False, scale=1.0)
-    np.testing.assert_allclose(cap.truth, scene[5:125, 5:125], rtol=1e-6)
+    np.testing.assert_allclose(cap.truth, scene[5:65, 5:65], rtol=1e-6)
     p = 3
     for t, (r, c) in list(enumerate(cap.scan_order))[::4]:  # frames 0, 4, 8
         moved = motion.scene_at(scene, t - 4.0)

@@ -122,11 +122,13 @@ def estimate_depth(views, cfg: SystemConfig, calibration=None, *, candidates: in
 
     uu, vv = np.nonzero(mask)
     au, av = (uu - c).astype(np.float64), (vv - c).astype(np.float64)
-    sel = arr[uu, vv]
+    # fancy indexing copies: the caller's array is never touched, and torch shares this copy
+    sel = np.ascontiguousarray(arr[uu, vv], dtype=np.float32)
     if not np.isfinite(sel).all():
         raise ValueError("views contain NaN or infinite values")
     with torch.no_grad():
-        stack = torch.tensor(sel, dtype=torch.float32, device=dev)
+        stack = torch.from_numpy(sel).to(dev)
+        del sel
         if shift_maps is not None:
             stack = warp_views(stack, torch.tensor(shift_maps[uu, vv], device=dev))
         if normalize:
@@ -134,15 +136,19 @@ def estimate_depth(views, cfg: SystemConfig, calibration=None, *, candidates: in
             if bool((means <= 0).any()):
                 raise ValueError("a view inside the pupil has a non-positive mean; "
                                  "pass normalize=False or a smaller view_mask")
-            stack = stack / means * means.mean()
+            stack.div_(means).mul_(means.mean())
         centre = int(np.nonzero((uu == c) & (vv == c))[0][0])
-        guide = stack[centre]
+        guide = stack[centre].clone()
         gf = GuidedFilter(guide, radius=radius, eps=eps)
         sweep = CostVolume(stack, au, av, centre, float(np.abs(cands).max()), cost=cost,
                            occlusion=occlusion)
+        # from here on the (mean-subtracted, padded) copy inside the sweep serves for the views:
+        # the refinement's variance does not see a constant offset
+        del stack
         vol = sweep.volume(cands, aggregate=gf, progress=progress)
         disp, idx = subpixel_minimum(vol, cands)
         conf = peak_ratio_confidence(vol, idx)
+        stack = sweep.views
         del vol, sweep
         if refine_iterations > 0:
             disp = gauss_newton_refine(stack, au, av, disp, gf, iterations=refine_iterations,

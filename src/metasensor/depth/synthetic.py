@@ -222,13 +222,17 @@ def scene_slanted(shape, d_left: float, d_right: float,
 def scene_staircase(shape, steps: int, d_min: float, d_max: float,
                     seed: int = 0) -> tuple[np.ndarray, list[Layer]]:
     """A staircase: ``steps`` vertical bands at disparities from ``d_min`` (left) to ``d_max``
-    (right). Layers are ordered back to front (largest disparity = farthest object first)."""
+    (right). Layers are ordered back to front (largest disparity = farthest object first); each
+    step continues under the nearer steps (a solid staircase: no holes at the occluding edges).
+    With ``d_min > d_max`` the left steps are the far ones and each continues under the right."""
     tex = random_texture(shape, seed)
     edges = np.linspace(0, shape[1], steps + 1).round().astype(int)
     values = np.linspace(d_min, d_max, steps)
     layers = []
     for i in np.argsort(-values):
         a = np.zeros(shape)
-        a[:, edges[i]:edges[i + 1]] = 1
+        nearer_left = i > 0 and values[i - 1] < values[i]
+        nearer_right = i < steps - 1 and values[i + 1] < values[i]
+        a[:, 0 if nearer_left else edges[i]:shape[1] if nearer_right else edges[i + 1]] = 1
         layers.append(Layer(a, float(values[i])))
     return tex, layers

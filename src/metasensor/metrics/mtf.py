@@ -10,13 +10,20 @@ writes it out (after Burns' ``sfrmat3``/``sfrmat4``):
    the fitted line. The rows are trimmed to a whole number of phase cycles of the slant.
 3. Projection: every pixel centre is projected onto the edge **normal** (signed distance
    ``(x - x_edge(row)) * cos(theta)``, theta = edge angle) and averaged into bins of width
-   ``1 / oversample`` pixel: the oversampled edge-spread function (ESF). Empty bins are linearly
-   interpolated.
-4. Line-spread function (LSF) = first difference of the ESF; a Hamming (or Tukey / no) window
-   centred on the LSF centroid; FFT; modulus normalised to 1 at zero frequency.
+   ``1 / oversample`` pixel: the oversampled edge-spread function (ESF). Each bin's mean is placed
+   at the mean position of its samples and interpolated back to the bin centres (uneven phase
+   filling at some tilts would otherwise ripple the MTF); empty bins are interpolated.
+4. Line-spread function (LSF) = first difference of the ESF, kept within
+   ``max(48 px, 10 edge widths)`` of the edge; a Hamming (or Tukey / no) window centred on the
+   edge; FFT; modulus normalised to 1 at zero frequency.
 5. Corrections: the two-point difference has the transfer ``sinc(f * delta)`` (ISO 12233 divides by
    it); averaging the pixels into bins of width ``delta`` is a box filter of the same width and
    transfer, which is divided out too (``correct_binning=True``; ISO's sfrmat does not).
+
+Beyond ISO 12233 (for noisy images, ``tail_smoothing=True``): the LSF tails beyond 2.5 edge
+widths (10-90 %) are low-passed (Gaussian, one pixel) before the FFT; this removes most of the
+high-frequency noise of the flat parts of the ESF and keeps the tails' area, so MTF[0] and the
+low frequencies stay unbiased.
 
 Frequencies are in cycles per pixel **along the edge normal**. For a rotationally symmetric PSF
 this is the radial MTF of the optics times the pixel-aperture transfer along that direction,
@@ -35,6 +42,7 @@ __all__ = ["EdgeMTF", "slanted_edge_mtf", "measure_edge", "mtf50", "mtf_at", "ch
 
 _WINDOWS = ("hamming", "tukey", "none")
 TAIL_CORE = 2.5  # LSF core kept unsmoothed: this many 10-90 % edge widths each side
+MAX_REACH = 48.0  # pixels of the LSF kept each side of the edge (at least 10 edge widths)
 TAIL_TAPER = 0.5  # blend from core to smoothed tails over this fraction of the core
 
 
@@ -330,6 +338,10 @@ def measure_edge(image, roi=None, *, oversample: int = 4, window: str = "hamming
     lsf = np.diff(esf)
     lsf = lsf * np.sign(lsf.sum())
     mid, width = _lsf_centre_width(esf * np.sign(esf[-1] - esf[0]), oversample)
+    # far from the edge the ESF holds only noise: keep max(MAX_REACH px, 10 edge widths) a side
+    reach = max(MAX_REACH * oversample, 10.0 * width)
+    lo_b, hi_b = max(0, int(mid - reach)), min(lsf.size, int(math.ceil(mid + reach)) + 1)
+    lsf, mid = lsf[lo_b:hi_b], mid - lo_b
     if tail_smoothing:
         lsf = _smooth_tails(lsf, mid, max(TAIL_CORE * width, 4.0 * oversample), oversample)
     half = max(mid, lsf.size - 1 - mid)

@@ -46,6 +46,9 @@ def read_psf_file(path: Path):
             attrs = dict(f["psf"].attrs) | dict(f.attrs)
     except OSError as exc:
         raise ValueError(f"{path}: not a readable HDF5 file ({exc})") from None
+    if int(np.ravel(attrs.get("subsample", 1))[0]) != 1:
+        raise ValueError(f"{path}: PSF bank sampled at pixel_pitch/{attrs['subsample']}; "
+                         "reconstruction needs subsample 1")
     cfg = None
     for key in ("config", "system", "cfg"):
         if key in attrs:
