@@ -105,7 +105,7 @@ def capture_figure(cap, path: Path) -> Path:
         ax.set_title(title)
         ax.axis("off")
     fig.suptitle(f"scan {cap.config.scan}x{cap.config.scan}, SNR {cap.snr_db:.1f} dB")
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, 0, 1, 0.94))
     with atomic_path(path) as tmp:
         fig.savefig(tmp, dpi=100)
     plt.close(fig)
