@@ -33,7 +33,7 @@ _HALVES = ("top", "bottom", "left", "right")
 def pad_views(views: torch.Tensor, pad: int) -> torch.Tensor:
     """Replicate-pad a stack ``(N, H, W)`` by ``pad`` pixels on every side."""
     if pad <= 0:
-        return views.contiguous()
+        return views.clone()
     return torch.nn.functional.pad(views[:, None], (pad, pad, pad, pad), mode="replicate")[:, 0]
 
 
@@ -76,13 +76,20 @@ class CostVolume:
         reach = float(max_disparity) * float(max(np.abs(self.au).max(), np.abs(self.av).max()))
         self.pad = int(math.ceil(reach)) + 2
         # one constant off every view: costs unchanged, float32 sums of squares far more precise
-        self.padded = pad_views(views - views.mean(), self.pad)
+        self.padded = pad_views(views, self.pad)
+        self.padded.sub_(views.mean())
         self.centre = int(centre)
         self.cost = cost
         self.occlusion = bool(occlusion)
         self.sector = _sectors(self.au, self.av)
         self.count = np.bincount(self.sector, minlength=9).astype(np.float64)
         self.halves = _half_members()
+
+    @property
+    def views(self) -> torch.Tensor:
+        """The views ``(N, H, W)`` less their common mean (a view into the padded copy)."""
+        p, (h, w) = self.pad, self.shape
+        return self.padded[:, p:p + h, p:p + w]
 
     # ----------------------------------------------------------------- resampling
     def shifted(self, i: int, dy: float, dx: float, out: torch.Tensor,

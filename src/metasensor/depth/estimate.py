@@ -85,7 +85,8 @@ def estimate_depth(views, cfg: SystemConfig, calibration=None, *, candidates: in
                    disparity_range: tuple[float, float] | None = None,
                    view_mask: np.ndarray | None = None, cost: str = "variance",
                    occlusion: bool = True, radius: int = 4, eps: float = 0.01,
-                   refine_iterations: int = 2, fill: bool = False, normalize: bool = True,
+                   refine_iterations: int = 2, fill: bool = True, fill_threshold: float = 0.1,
+                   fill_radius: int = 16, normalize: bool = True,
                    focal_length: float | None = None, focus_distance: float | None = None,
                    device=None, progress: bool = False) -> DepthResult:
     """Disparity, confidence and depth from views ``(nnum, nnum, H, W)`` (or a ``Capture``).
@@ -99,7 +100,8 @@ def estimate_depth(views, cfg: SystemConfig, calibration=None, *, candidates: in
         contain the centre view. ``cost``: ``"variance"`` or ``"sad"``; ``occlusion``: half-pupil
         occlusion handling. ``radius`` [view px] and ``eps`` (relative to the guide's variance) of
         the guided cost aggregation. ``refine_iterations``: Gauss–Newton steps (0 = parabola fit
-        only). ``fill``: confidence-weighted edge-aware filling of weak pixels.
+        only). ``fill``: replace pixels with confidence below ``fill_threshold`` by an
+        edge-aware, confidence-weighted average of the confident ones within ``fill_radius``.
     focal_length, focus_distance : main-lens geometry [m] overriding the config's.
     """
     if not isinstance(cfg, SystemConfig):
@@ -120,11 +122,13 @@ def estimate_depth(views, cfg: SystemConfig, calibration=None, *, candidates: in
 
     uu, vv = np.nonzero(mask)
     au, av = (uu - c).astype(np.float64), (vv - c).astype(np.float64)
-    sel = arr[uu, vv]
+    # fancy indexing copies: the caller's array is never touched, and torch shares this copy
+    sel = np.ascontiguousarray(arr[uu, vv], dtype=np.float32)
     if not np.isfinite(sel).all():
         raise ValueError("views contain NaN or infinite values")
     with torch.no_grad():
-        stack = torch.tensor(sel, dtype=torch.float32, device=dev)
+        stack = torch.from_numpy(sel).to(dev)
+        del sel
         if shift_maps is not None:
             stack = warp_views(stack, torch.tensor(shift_maps[uu, vv], device=dev))
         if normalize:
@@ -132,15 +136,19 @@ def estimate_depth(views, cfg: SystemConfig, calibration=None, *, candidates: in
             if bool((means <= 0).any()):
                 raise ValueError("a view inside the pupil has a non-positive mean; "
                                  "pass normalize=False or a smaller view_mask")
-            stack = stack / means * means.mean()
+            stack.div_(means).mul_(means.mean())
         centre = int(np.nonzero((uu == c) & (vv == c))[0][0])
-        guide = stack[centre]
+        guide = stack[centre].clone()
         gf = GuidedFilter(guide, radius=radius, eps=eps)
         sweep = CostVolume(stack, au, av, centre, float(np.abs(cands).max()), cost=cost,
                            occlusion=occlusion)
+        # from here on the (mean-subtracted, padded) copy inside the sweep serves for the views:
+        # the refinement's variance does not see a constant offset
+        del stack
         vol = sweep.volume(cands, aggregate=gf, progress=progress)
         disp, idx = subpixel_minimum(vol, cands)
         conf = peak_ratio_confidence(vol, idx)
+        stack = sweep.views
         del vol, sweep
         if refine_iterations > 0:
             disp = gauss_newton_refine(stack, au, av, disp, gf, iterations=refine_iterations,
@@ -148,7 +156,8 @@ def estimate_depth(views, cfg: SystemConfig, calibration=None, *, candidates: in
                                        occlusion=occlusion)
             disp = torch.clamp(disp, float(cands[0]), float(cands[-1]))
         if fill:
-            disp = fill_low_confidence(disp, conf, guide, radius=3 * radius, eps=eps)
+            disp = fill_low_confidence(disp, conf, guide, radius=fill_radius,
+                                       threshold=fill_threshold, eps=eps)
         disparity = to_numpy(disp).astype(np.float32)
         confidence = to_numpy(conf).astype(np.float32)
     z = geometry.disparity_to_image_depth(disparity, cfg).astype(np.float32)

@@ -6,13 +6,11 @@ Written here by hand (no library offers these for light-field view stacks).
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 import torch
 
 from metasensor.depth.cost import _half_members, _sectors
-from metasensor.depth.filters import GuidedFilter
+from metasensor.depth.filters import GuidedFilter, box_mean
 
 __all__ = ["subpixel_minimum", "peak_ratio_confidence", "gauss_newton_refine",
            "fill_low_confidence"]
@@ -73,7 +71,7 @@ def _with_gradients(v: torch.Tensor) -> torch.Tensor:
 
 def gauss_newton_refine(views: torch.Tensor, au, av, disparity: torch.Tensor,
                         aggregate, iterations: int = 2, max_change: float = 0.1,
-                        occlusion: bool = False, chunk: int = 16) -> torch.Tensor:
+                        occlusion: bool = False, chunk: int = 8) -> torch.Tensor:
     """Refine a disparity map continuously by Gauss–Newton on the aggregated view variance.
 
     With ``W_i(δ) = V_i(p + δ a_i)`` (bilinear) and ``g_i = ∇V_i(p + δ a_i) · a_i = ∂W_i/∂δ``, one
@@ -146,18 +144,26 @@ def gauss_newton_refine(views: torch.Tensor, au, av, disparity: torch.Tensor,
 
 
 def fill_low_confidence(disparity: torch.Tensor, confidence: torch.Tensor, guide: torch.Tensor,
-                        radius: int, eps: float = 0.01, power: float = 2.0) -> torch.Tensor:
-    """Edge-aware, confidence-weighted smoothing: ``GF(w · δ) / GF(w)``, ``w = confidence^power``.
-
-    Confident pixels keep (nearly) their value; low-confidence ones (textureless, occluded) take
-    the confident disparities around them on the same side of image edges.
-    """
-    gf = GuidedFilter(guide, radius=max(1, int(radius)), eps=eps)
-    wgt = torch.clamp(confidence, 0.0, 1.0) ** power + 1e-4
+                        radius: int, threshold: float = 0.1, eps: float = 0.01,
+                        agree: float = 0.15) -> torch.Tensor:
+    """Replace weak pixels (``confidence < threshold``: no texture) by an edge-aware,
+    confidence-weighted average of the confident ones around them, ``GF(w δ) / GF(w)``, with
+    ``w = confidence`` on confident pixels and 0 elsewhere and ``GF`` a guided filter of the given
+    radius steered by the centre view. Only where those confident neighbours agree (weighted
+    standard deviation within the radius below ``agree`` view px): a weak pixel between surfaces
+    at different depths (an occlusion edge) keeps its own value rather than an average that
+    belongs to neither. Confident pixels are returned unchanged."""
+    r = max(1, int(radius))
+    gf = GuidedFilter(guide, radius=r, eps=eps)
+    weak = confidence < threshold
+    wgt = torch.where(weak, torch.zeros_like(confidence), confidence)
     den = gf(wgt)
-    out = gf(disparity * wgt) / torch.clamp(den, min=1e-4)
-    # where the normalisation is unreliable keep the raw value
-    bad = (den < 1e-3) | ~torch.isfinite(out)
-    out = torch.where(bad, disparity, out)
-    blend = torch.clamp(confidence, 0.0, 1.0)
-    return blend * disparity + (1 - blend) * out if math.isfinite(power) else out
+    num = gf(disparity * wgt)
+    reach = den > 0.05 * torch.clamp(wgt.max(), min=1e-12)
+    filled = torch.where(reach, num / torch.where(reach, den, torch.ones_like(den)), disparity)
+    # agreement of the confident neighbours (plain box weights: always non-negative)
+    bw = torch.clamp(box_mean(wgt, r), min=1e-12)
+    m1 = box_mean(wgt * disparity, r) / bw
+    m2 = box_mean(wgt * disparity * disparity, r) / bw
+    spread = torch.sqrt(torch.clamp(m2 - m1 * m1, min=0.0))
+    return torch.where(weak & reach & (spread < agree), filled, disparity)

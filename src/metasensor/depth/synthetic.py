@@ -147,8 +147,11 @@ def render_views(texture: np.ndarray, layers: list[Layer], cfg: SystemConfig,
         alpha = np.clip(np.asarray(layer.alpha, dtype=np.float64), 0, 1)
         if alpha.shape != texture.shape:
             raise ValueError(f"layer alpha shape {alpha.shape} != texture {texture.shape}")
-        col = ndimage.convolve(texture * alpha, kern, mode="reflect")
-        alp = ndimage.convolve(alpha, kern, mode="reflect")
+        # blurred colour and opacity, spline-prefiltered once (sampled below with prefilter off)
+        col = ndimage.spline_filter(ndimage.convolve(texture * alpha, kern, mode="reflect"),
+                                    order=3, mode="mirror")
+        alp = ndimage.spline_filter(ndimage.convolve(alpha, kern, mode="reflect"), order=3,
+                                    mode="mirror")
         disp = layer.disparity
         disp_map = None if np.isscalar(disp) else np.asarray(disp, dtype=np.float64)
         prepared.append((col, alp, float(disp) if disp_map is None else None, disp_map))
@@ -173,8 +176,10 @@ def render_views(texture: np.ndarray, layers: list[Layer], cfg: SystemConfig,
                         dq = ndimage.map_coordinates(dmap, [ey, ex], order=1, mode="nearest")
                         ey, ex = qy - dq * (u - c), qx - dq * (v - c)
                     qy, qx = ey, ex
-                cv = ndimage.map_coordinates(col, [qy, qx], order=3, mode="reflect")
-                av = ndimage.map_coordinates(alp, [qy, qx], order=3, mode="reflect")
+                cv = ndimage.map_coordinates(col, [qy, qx], order=3, mode="mirror",
+                                             prefilter=False)
+                av = ndimage.map_coordinates(alp, [qy, qx], order=3, mode="mirror",
+                                             prefilter=False)
                 out = out * (1 - np.clip(av, 0, 1)) + cv
             views[u, v] = out
     # truth: the front-most opaque layer at each centre-view sample
@@ -217,13 +222,17 @@ def scene_slanted(shape, d_left: float, d_right: float,
 def scene_staircase(shape, steps: int, d_min: float, d_max: float,
                     seed: int = 0) -> tuple[np.ndarray, list[Layer]]:
     """A staircase: ``steps`` vertical bands at disparities from ``d_min`` (left) to ``d_max``
-    (right). Layers are ordered back to front (largest disparity = farthest object first)."""
+    (right). Layers are ordered back to front (largest disparity = farthest object first); each
+    step continues under the nearer steps (a solid staircase: no holes at the occluding edges).
+    With ``d_min > d_max`` the left steps are the far ones and each continues under the right."""
     tex = random_texture(shape, seed)
     edges = np.linspace(0, shape[1], steps + 1).round().astype(int)
     values = np.linspace(d_min, d_max, steps)
     layers = []
     for i in np.argsort(-values):
         a = np.zeros(shape)
-        a[:, edges[i]:edges[i + 1]] = 1
+        nearer_left = i > 0 and values[i - 1] < values[i]
+        nearer_right = i < steps - 1 and values[i + 1] < values[i]
+        a[:, 0 if nearer_left else edges[i]:shape[1] if nearer_right else edges[i + 1]] = 1
         layers.append(Layer(a, float(values[i])))
     return tex, layers

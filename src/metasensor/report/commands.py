@@ -16,7 +16,7 @@ def register(app: typer.Typer) -> None:
         size: int = typer.Option(512, "--size", min=96, help="scene side in pixels"),
         scan: int = typer.Option(5, "--scan", help="scan period of the meta-imaging sensor"),
         snr: float = typer.Option(30.0, "--snr", help="SNR of the captures in dB"),
-        blocks: str = typer.Option("4x4", "--blocks", help="multisite blocks, e.g. 4x4"),
+        blocks: str = typer.Option("3x3", "--blocks", help="multisite blocks, e.g. 4x4"),
         seed: int = typer.Option(0, "--seed", help="random seed"),
     ) -> None:
         """Simulate the built-in resolution chart through a cheap single lens, reconstruct it,

@@ -38,7 +38,8 @@ class DemoSettings:
     snr_db: float = 30.0
     lens_strength: float = 2.0
     field_px: int = 6004
-    blocks: tuple[int, int] = (4, 4)
+    blocks: tuple[int, int] = (3, 3)
+    field_blocks: tuple[int, int] = (4, 4)
     iterations: int | None = None
     seed: int = 0
     extra: dict = field(default_factory=dict)
@@ -114,11 +115,12 @@ def run_demo(out: str | Path, settings: DemoSettings | None = None, progress: bo
     fz_sensor = lens.field_zernike(cfg, (s.field_px, s.field_px))
 
     steps.set_postfix_str("simulating the meta-imaging sensor")
-    cap = simulate(scene, cfg, field_zernike=fz_sensor, snr_db=s.snr_db, seed=s.seed)
+    cap = simulate(scene, cfg, field_zernike=fz_sensor, snr_db=s.snr_db, seed=s.seed,
+                   field_blocks=s.field_blocks)
     steps.update()
     steps.set_postfix_str("simulating the plain light-field camera")
     lf = simulate(scene, cfg.replace(scan=1), field_zernike=fz_sensor, snr_db=s.snr_db,
-                     seed=s.seed + 1, comparison=False)
+                     seed=s.seed + 1, comparison=False, field_blocks=s.field_blocks)
     steps.update()
 
     steps.set_postfix_str("reconstructing (meta-imaging, multisite)")
