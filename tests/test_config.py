@@ -78,3 +78,10 @@ def test_unknown_key_and_bad_toml(tmp_path):
         ms.SystemConfig.from_toml(bad)
     with pytest.raises(ConfigError, match="not found"):
         ms.SystemConfig.from_toml(tmp_path / "missing.toml")
+
+
+def test_optical_digest_ignores_non_optical_fields():
+    cfg = ms.SystemConfig()
+    assert cfg.optical_digest() == cfg.replace(scan=3, bit_depth=16).optical_digest()
+    assert cfg.optical_digest() != cfg.replace(na=0.04).optical_digest()
+    assert cfg.digest() != cfg.replace(scan=3).digest()

@@ -15,10 +15,14 @@ app = typer.Typer(
     pretty_exceptions_enable=False,
 )
 
-_STAGES = ("optics", "simulate", "sensor", "recon", "motion", "depth", "metrics", "report")
+_COMMAND_MODULES = (
+    "optics.commands", "simulate.commands", "sensor.commands", "recon.commands",
+    "recon.dao_commands", "motion.commands", "depth.commands", "metrics.commands",
+    "report.commands",
+)
 
-for _stage in _STAGES:
-    importlib.import_module(f"metasensor.{_stage}.commands").register(app)
+for _module in _COMMAND_MODULES:
+    importlib.import_module(f"metasensor.{_module}").register(app)
 
 
 def main() -> None:

@@ -279,3 +279,12 @@ class SystemConfig:
     def digest(self) -> str:
         """Stable hash of every parameter (for cache keys)."""
         return hashlib.sha256(self.to_json().encode()).hexdigest()[:16]
+
+    _OPTICAL_FIELDS = ("nnum", "mla_pitch", "mla_focal", "lenslet_aperture", "aperture_diameter",
+                       "wavelength", "na", "obstruction")
+
+    def optical_digest(self) -> str:
+        """Hash of the parameters that shape the PSFs only (not scan, sensor size, bit depth,
+        magnification or main-lens geometry), so PSF caches are shared across scan periods."""
+        optical = {k: getattr(self, k) for k in self._OPTICAL_FIELDS}
+        return hashlib.sha256(json.dumps(optical, sort_keys=True).encode()).hexdigest()[:16]

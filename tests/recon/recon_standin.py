@@ -10,6 +10,7 @@ aperture, Fourier-transformed to the lenslet's focal plane, |.|², binned to pix
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 
 def standin_psfs(nnum: int = 15, radius: int = 10, os: int = 3, na: float = 0.05,
@@ -91,3 +92,15 @@ def synth_views(scene: np.ndarray, bank: np.ndarray, d: int, border: int = 10) -
     views = samples[:, sl[0], sl[1]][:, border:border + s, border:border + s]
     truth = scene[border * d:(border + s) * d, border * d:(border + s) * d]
     return views.reshape(n, n, s, s).astype(np.float32), truth.astype(np.float32)
+
+
+@pytest.fixture(autouse=True, scope="module")
+def one_torch_thread():
+    """Run the recon tests on one torch thread (restored after): on a shared 2-core machine two
+    threads per op spin against other jobs and slow these small transforms ~10x."""
+    import torch
+
+    before = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(before)

@@ -5,7 +5,7 @@ import types
 
 import numpy as np
 import pytest
-from recon_standin import standin_psfs, synth_views
+from recon_standin import one_torch_thread, standin_psfs, synth_views  # noqa: F401
 
 from metasensor.config import SystemConfig
 from metasensor.recon.api import reconstruct

@@ -62,13 +62,17 @@ def test_solve_w_alpha_one_is_soft_threshold():
 
 
 def test_solve_w_table_matches_closed_form(rng):
-    # zero below the exact threshold, linear interpolation of the smooth branch above it:
-    # |error| <= 1e-5 everywhere except for ties exactly at the threshold
+    # nearest point of a 2^14 table: |error| <= 2e-4 · max|v| except for elements within one
+    # table step of the threshold (they may fall on either side of the jump)
+    from metasensor.recon.fastdeconv import _threshold_two_thirds
+
     v = torch.tensor(rng.normal(0, 0.5, 20000))
+    vmax = float(v.abs().max())
     for beta in (1.0, 22.6, 181.0):
         exact = solve_w(v, beta)
-        fast = solve_w_table(v, beta, n=4096)
-        assert float((fast - exact).abs().max()) < 1e-5
+        fast = solve_w_table(v, beta)
+        near = (v.abs() - _threshold_two_thirds(beta)).abs() < 2 * vmax / (1 << 14)
+        assert float((fast - exact).abs()[~near].max()) < 2e-4 * vmax
     # the threshold itself: minimiser 0 just below, non-zero just above
     from metasensor.recon.fastdeconv import _threshold_two_thirds
 
@@ -115,8 +119,11 @@ def test_scale_equivariant_and_batched_equals_single():
     np.testing.assert_allclose(x2, 7.0 * x1, rtol=1e-3, atol=1e-3 * 7.0)
     k2 = np.roll(k, 1, axis=1)
     batch = hyper_laplacian_deconv(np.stack([b, b]), np.stack([k, k2]))
-    np.testing.assert_allclose(batch[0], x1, atol=1e-4)
-    np.testing.assert_allclose(batch[1], hyper_laplacian_deconv(b, k2), atol=1e-4)
+    # the w lookup table spans the batch's largest gradient, so batched and single results
+    # agree to the table's resolution (images in [0, 1]): 1e-2 absolute, 1e-3 r.m.s.
+    for got, want in ((batch[0], x1), (batch[1], hyper_laplacian_deconv(b, k2))):
+        np.testing.assert_allclose(got, want, atol=1e-2)
+        assert np.sqrt(np.mean((got - want) ** 2)) < 1e-3
 
 
 def test_input_not_modified_and_bad_input():

@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 import scipy.signal
 import torch
+from recon_standin import one_torch_thread  # noqa: F401
 
 from metasensor.recon.forward import PhaseSpaceOperator, make_geometry, smooth_size
 

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 import torch
-from recon_standin import gaussian_psfs, synth_views
+from recon_standin import gaussian_psfs, one_torch_thread, synth_views  # noqa: F401
 
 from metasensor.config import SystemConfig
 from metasensor.recon.forward import PhaseSpaceOperator, make_geometry

@@ -2,7 +2,7 @@
 
 import numpy as np
 import pytest
-from recon_standin import gaussian_psfs, synth_views
+from recon_standin import gaussian_psfs, one_torch_thread, synth_views  # noqa: F401
 
 from metasensor.config import SystemConfig
 from metasensor.recon.api import reconstruct

@@ -1,4 +1,12 @@
-"""Use the real optics stage when it is installed, else the stand-in PSFs of fake_optics."""
+"""PSFs for the simulator's tests.
+
+Physics tests (photometry, point sources, field-dependent blur, AO, ...) use the real optics stage
+(``metasensor.optics.psf``) on a small system (``SMALL``: nnum = 5, 1.0 s per fine bank) whenever
+it is installed. Geometry and statistics tests (exact realignment for every scan period and order
+with nnum = 15, noise statistics, motion bookkeeping, CLI) do not depend on the PSFs' physics and
+request the ``standin`` fixture: the fast geometric stand-in of ``fake_optics.py``. Without the
+optics stage every test uses the stand-in.
+"""
 
 import importlib
 import sys
@@ -7,7 +15,13 @@ from pathlib import Path
 
 import pytest
 
+import metasensor as ms
+
 sys.path.insert(0, str(Path(__file__).parent))
+
+# a 5 x 5-pixel lenslet system with the prototype's pixel, NA and lenslet f-number
+SMALL = ms.SystemConfig(nnum=5, mla_pitch=23e-6, mla_focal=230e-6, scan=5,
+                        sensor_shape=(64, 64))
 
 
 def _real_optics() -> bool:
@@ -22,11 +36,7 @@ def _real_optics() -> bool:
 REAL = _real_optics()
 
 
-@pytest.fixture(autouse=True)
-def optics_standin(monkeypatch):
-    if REAL:
-        yield False
-        return
+def _install(monkeypatch):
     import fake_optics
 
     psf = types.ModuleType("metasensor.optics.psf")
@@ -41,4 +51,25 @@ def optics_standin(monkeypatch):
 
     monkeypatch.setattr(optics_pkg, "psf", psf, raising=False)
     monkeypatch.setattr(optics_pkg, "zernike", zer, raising=False)
-    yield True
+    monkeypatch.setattr(ms, "view_psfs", fake_optics.view_psfs, raising=False)
+    monkeypatch.setattr(ms, "widefield_psf", fake_optics.widefield_psf, raising=False)
+
+
+@pytest.fixture
+def standin(monkeypatch):
+    """Force the geometric stand-in PSFs (geometry/statistics tests)."""
+    _install(monkeypatch)
+    return True
+
+
+@pytest.fixture(autouse=True)
+def _fallback(monkeypatch):
+    if not REAL:
+        _install(monkeypatch)
+    yield
+
+
+@pytest.fixture
+def view_bank():
+    """The pixel-pitch bank of whatever optics is active: ``view_bank(cfg, zernike=None)``."""
+    return lambda cfg, zernike=None: sys.modules["metasensor.optics.psf"].view_psfs(cfg, zernike)

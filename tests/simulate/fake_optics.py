@@ -80,6 +80,19 @@ def _gradient(z, phase, rx, ry, depth, cfg):
 
 def view_psfs(cfg, zernike=None, depth=0.0, *, phase=None, amplitude=None, subsample=1,
               size=None, device=None, cache=True):
+    if phase is None and amplitude is None:  # memoised (tests call it with few arguments)
+        key = (cfg.to_json(), None if zernike is None else tuple(np.asarray(zernike, float)),
+               float(depth), subsample, size)
+        if key not in _MEMO:
+            _MEMO[key] = _view_psfs(cfg, zernike, depth, None, subsample, size)
+        return _MEMO[key].copy()
+    return _view_psfs(cfg, zernike, depth, phase, subsample, size)
+
+
+_MEMO: dict = {}
+
+
+def _view_psfs(cfg, zernike, depth, phase, subsample, size):
     n = cfg.nnum
     c = n // 2
     rx, ry = cfg.pupil_coords()
@@ -109,7 +122,7 @@ def view_psfs(cfg, zernike=None, depth=0.0, *, phase=None, amplitude=None, subsa
             xx2 = d[None, :] - dx[a, b]
             rr = np.hypot(yy2, xx2)
             edge = 0.5 * (1 - special.erf((rr - n / 2) / (0.5 * math.sqrt(2))))
-            out[a, b] = share[a, b] * edge
+            out[a, b] = share[a, b] * edge / subsample**2  # view_psfs normalisation
     return out
 
 

@@ -21,9 +21,9 @@ def _run(args):
     return CliRunner().invoke(app, (["simulate"] if group else []) + args)
 
 
-def test_cli_writes_a_capture(tmp_path):
+def test_cli_writes_a_capture(tmp_path, standin):
     out = tmp_path / "cap"
-    res = _run(["--scene", "chart", "--size", "132", "--scan",
+    res = _run(["--scene", "chart", "--size", "70", "--scan",
                                    "3", "--snr", "25", "--zernike", "4:0.3,6:0.2", "--out",
                                    str(out)])
     assert res.exit_code == 0, res.output
@@ -33,7 +33,7 @@ def test_cli_writes_a_capture(tmp_path):
         assert name in names
     frames = tifffile.imread(out / "frames.tif")
     cfg = ms.SystemConfig.from_toml(out / "config.toml")
-    assert frames.dtype == np.uint16 and frames.shape == (9, 132, 132) and cfg.scan == 3
+    assert frames.dtype == np.uint16 and frames.shape == (9, 70, 70) and cfg.scan == 3
     from metasensor.io.views import read_views
 
     assert np.array_equal(read_views(out / "views.tif"), ms.realign(frames, cfg))
@@ -43,7 +43,7 @@ def test_cli_writes_a_capture(tmp_path):
     assert abs(meta["snr_db"] - 25) < 0.5
 
 
-def test_cli_bad_input(tmp_path):
+def test_cli_bad_input(tmp_path, standin):
     res = _run(["--scene", "nope", "--size", "64", "--out",
                                    str(tmp_path)])
     assert res.exit_code != 0 and "unknown scene" in str(res.exception)

@@ -9,7 +9,7 @@ from metasensor.simulate.noise import NoiseModel, add_noise, apply_noise, measur
 
 
 @pytest.mark.parametrize("snr", [3.0, 10.0, 30.0])
-def test_simulated_views_hit_the_requested_snr(snr):
+def test_simulated_views_hit_the_requested_snr(snr, standin):
     # SNR = 10 log10(Σ clean² / Σ noise²) over the views; requirement: within 0.5 dB
     cfg = ms.SystemConfig(sensor_shape=(132, 132))
     scene = np.random.default_rng(0).random((132, 132)).astype(np.float32)

@@ -44,6 +44,13 @@ def test_fft_size_is_smooth_multiple():
         assert k == 1
 
 
+def test_upsampler_kinds():
+    np.testing.assert_allclose(upsampler_response(3, "box"), [1 / 3] * 3)
+    np.testing.assert_allclose(upsampler_response(3, "point"), [1.0])
+    with pytest.raises(ValueError, match="upsample"):
+        upsampler_response(3, "lanczos")
+
+
 def test_upsampler_is_interpolating_and_flux_preserving():
     u = upsampler_response()
     c = len(u) // 2

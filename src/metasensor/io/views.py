@@ -45,6 +45,7 @@ def write_views(path: str | Path, views: np.ndarray, cfg: SystemConfig | None = 
     pages = views.reshape(n * n, *views.shape[2:])
     with atomic_path(path) as tmp:
         tifffile.imwrite(tmp, pages, description=json.dumps(meta), metadata=None,
+                         photometric="minisblack",
                          bigtiff=pages.nbytes > 2**31)
     return path
 

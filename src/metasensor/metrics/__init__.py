@@ -1,16 +1,9 @@
 """Image-quality metrics: PSNR, SSIM, slanted-edge MTF (ISO 12233), field maps, evaluation."""
 
+from metasensor.metrics.evaluation import evaluate, write_evaluation
 from metasensor.metrics.field import FieldMTF, field_mtf, find_edge_rois
 from metasensor.metrics.mtf import EdgeMTF, measure_edge, mtf50, mtf_at, slanted_edge_mtf
 from metasensor.metrics.quality import psnr, snr_db, ssim
 
 __all__ = ["slanted_edge_mtf", "measure_edge", "EdgeMTF", "mtf50", "mtf_at", "psnr", "ssim",
-           "snr_db", "find_edge_rois", "field_mtf", "FieldMTF", "evaluate"]
-
-
-def __getattr__(name):
-    if name == "evaluate":
-        from metasensor.metrics.evaluate import evaluate
-
-        return evaluate
-    raise AttributeError(f"module 'metasensor.metrics' has no attribute {name!r}")
+           "snr_db", "find_edge_rois", "field_mtf", "FieldMTF", "evaluate", "write_evaluation"]

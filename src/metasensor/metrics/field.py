@@ -21,6 +21,7 @@ __all__ = ["find_edge_rois", "field_mtf", "FieldMTF", "field_radius"]
 
 CENTRE_RADIUS = 1.0 / 3.0  # normalised field radius up to which an ROI counts as "centre"
 EDGE_RADIUS = 2.0 / 3.0  # ... and from which it counts as "edge"
+GROUP_SPAN = 0.1  # if no ROI is that central (or peripheral): those within this of the extreme
 
 
 def field_radius(y: float, x: float, shape: tuple[int, int]) -> float:
@@ -30,20 +31,26 @@ def field_radius(y: float, x: float, shape: tuple[int, int]) -> float:
 
 
 def _square_candidates(mask: np.ndarray, min_side: int, max_side: int):
+    """Connected components that look like rotated squares: (label, bbox, side, alpha) for whole
+    squares, and (label, bbox, touched borders) for squares cut by one image border."""
     from skimage.measure import label, regionprops
 
     lab = label(mask, connectivity=1)
     h, w = mask.shape
-    out = []
+    out, cut = [], []
     for reg in regionprops(lab):
         r0, c0, r1, c1 = reg.bbox
-        if r0 == 0 or c0 == 0 or r1 == h or c1 == w:
-            continue  # touches the border: background or a cut object
         bh, bw = r1 - r0, c1 - c0
+        if reg.solidity < 0.95:
+            continue
+        touched = [n for n, t in (("top", r0 == 0), ("bottom", r1 == h), ("left", c0 == 0),
+                                  ("right", c1 == w)) if t]
+        if touched:
+            if len(touched) == 1 and reg.area >= 0.7 * bh * bw:
+                cut.append((reg.label, (r0, r1, c0, c1), touched[0]))
+            continue
         side = math.sqrt(reg.area)
         if not (min_side <= side <= max_side) or not (0.8 <= bh / bw <= 1.25):
-            continue
-        if reg.solidity < 0.95:
             continue
         b = 0.5 * (bh + bw)
         s2a = b * b / reg.area - 1.0  # (cos a + sin a)^2 = 1 + sin 2a for a square
@@ -51,7 +58,29 @@ def _square_candidates(mask: np.ndarray, min_side: int, max_side: int):
             continue
         alpha = 0.5 * math.asin(min(max(s2a, 0.0), 1.0))
         out.append((reg.label, (r0, r1, c0, c1), side, alpha))
-    return lab, out
+    return lab, out, cut
+
+
+def _complete_cut(cut, alpha: float, min_side: int, max_side: int):
+    """Whole-square bbox, side and alpha of squares cut by one border (tilt from the others)."""
+    out = []
+    k = math.cos(alpha) + math.sin(alpha)
+    for own, (r0, r1, c0, c1), border in cut:
+        full = (c1 - c0) if border in ("top", "bottom") else (r1 - r0)
+        seen = (r1 - r0) if border in ("top", "bottom") else (c1 - c0)
+        side = full / k
+        if not (min_side <= side <= max_side) or not (0.5 * full <= seen <= full + 1):
+            continue
+        if border == "top":
+            r0 = r1 - full
+        elif border == "bottom":
+            r1 = r0 + full
+        elif border == "left":
+            c0 = c1 - full
+        else:
+            c1 = c0 + full
+        out.append((own, (r0, r1, c0, c1), side, alpha))
+    return out
 
 
 def _roi_ok(lab_same, lab_other, big_other, own, roi) -> bool:
@@ -89,12 +118,15 @@ def find_edge_rois(image, *, min_side: int = 16, max_side: int | None = None,
     rois: list[dict] = []
     masks = (s < t, s > t)
     labs = [_square_candidates(m, min_side, max_side) for m in masks]
+    alphas = [c[3] for lab in labs for c in lab[1]]
+    alpha_cut = float(np.median(alphas)) if alphas else math.radians(5.0)
     nsq = 0
     for p in range(2):
-        lab_same, cands = labs[p]
+        lab_same, whole, cut = labs[p]
         lab_other = labs[1 - p][0]
         counts = np.bincount(lab_other.ravel())
         big_other = int(np.argmax(counts[1:]) + 1) if counts.size > 1 else 0
+        cands = whole + _complete_cut(cut, alpha_cut, min_side, max_side)
         for own, (r0, r1, c0, c1), side, alpha in cands:
             sa = side * math.sin(alpha)
             m = int(math.ceil(sa + 0.15 * side))  # clear of the corners
@@ -105,14 +137,18 @@ def find_edge_rois(image, *, min_side: int = 16, max_side: int | None = None,
                     hh = int(round(half))
                     if name in ("left", "right"):
                         xe = c0 if name == "left" else c1 - sa
-                        roi = (r0 + m, r1 - m, int(xe - hh), int(math.ceil(xe + sa + hh)))
+                        a0, a1 = max(r0 + m, 0), min(r1 - m, h)  # along the edge, clipped
+                        roi = (a0, a1, int(xe - hh), int(math.ceil(xe + sa + hh)))
+                        across = (roi[2], roi[3], w)
                     else:
                         ye = r0 if name == "top" else r1 - sa
-                        roi = (int(ye - hh), int(math.ceil(ye + sa + hh)), c0 + m, c1 - m)
-                    y0, y1, x0, x1 = roi
-                    inside = 0 <= y0 and y1 <= h and 0 <= x0 and x1 <= w
-                    if inside and min(y1 - y0, x1 - x0) >= 8 and _roi_ok(
-                            lab_same, lab_other, big_other, own, roi):
+                        a0, a1 = max(c0 + m, 0), min(c1 - m, w)
+                        roi = (int(ye - hh), int(math.ceil(ye + sa + hh)), a0, a1)
+                        across = (roi[0], roi[1], h)
+                    inside = 0 <= across[0] and across[1] <= across[2]
+                    if (inside and a1 - a0 >= max(8, 0.25 * side) and across[1] - across[0] >= 8
+                            and _roi_ok(lab_same, lab_other, big_other, own, roi)):
+                        y0, y1, x0, x1 = roi
                         cy = 0.5 * (y0 + y1 - 1) if name in ("left", "right") else ye + sa / 2
                         cx = xe + sa / 2 if name in ("left", "right") else 0.5 * (x0 + x1 - 1)
                         rois.append({"roi": roi, "centre": (float(cy), float(cx)),
@@ -144,8 +180,12 @@ class FieldMTF:
     pixel_pitch: float | None = None
 
     def summary(self) -> dict:
-        """MTF50 at the field centre and edge (medians over ROIs with radius <= 1/3, >= 2/3;
-        if a group is empty, the ROI nearest to the centre / farthest from it) and their ratio."""
+        """MTF50 at the field centre and edge and their ratio (edge / centre).
+
+        Medians over the ROIs with normalised radius <= 1/3 (centre) and >= 2/3 (edge); where a
+        group is empty (e.g. a chart with a star in the middle), over the ROIs within 0.1 of the
+        smallest (largest) measured radius. ``centre_radius`` / ``edge_radius`` say where.
+        """
         ok = np.isfinite(self.mtf50)
         out: dict = {"n_rois": int(len(self.mtf50)), "n_measured": int(ok.sum())}
         if not ok.any():
@@ -153,11 +193,12 @@ class FieldMTF:
                        edge_over_centre=float("nan"))
             return out
         r, v = self.radius[ok], self.mtf50[ok]
-        c = v[r <= CENTRE_RADIUS] if np.any(r <= CENTRE_RADIUS) else v[[np.argmin(r)]]
-        e = v[r >= EDGE_RADIUS] if np.any(r >= EDGE_RADIUS) else v[[np.argmax(r)]]
-        out.update(centre_mtf50=float(np.median(c)), edge_mtf50=float(np.median(e)),
-                   edge_over_centre=float(np.median(e) / np.median(c)),
-                   centre_radius_max=float(CENTRE_RADIUS), edge_radius_min=float(EDGE_RADIUS))
+        cm = r <= CENTRE_RADIUS if np.any(r <= CENTRE_RADIUS) else r <= r.min() + GROUP_SPAN
+        em = r >= EDGE_RADIUS if np.any(r >= EDGE_RADIUS) else r >= r.max() - GROUP_SPAN
+        out.update(centre_mtf50=float(np.median(v[cm])), edge_mtf50=float(np.median(v[em])),
+                   edge_over_centre=float(np.median(v[em]) / np.median(v[cm])),
+                   centre_radius=float(np.median(r[cm])), edge_radius=float(np.median(r[em])),
+                   n_centre=int(cm.sum()), n_edge=int(em.sum()))
         if self.pixel_pitch is not None:
             k = 1.0 / (self.pixel_pitch * 1e3)
             out.update(centre_mtf50_lpmm=out["centre_mtf50"] * k,
@@ -165,13 +206,20 @@ class FieldMTF:
         return out
 
     def positions(self, n: int = 4) -> list[int]:
-        """Indices of up to ``n`` measured ROIs spread over the field radius (centre to edge)."""
+        """Indices of up to ``n`` measured ROIs at distinct field radii spread from the centre
+        to the edge (the ROI nearest to each of ``n`` evenly spaced target radii)."""
         ok = np.flatnonzero(np.isfinite(self.mtf50))
         if ok.size == 0:
             return []
-        order = ok[np.argsort(self.radius[ok])]
-        pick = np.unique(np.round(np.linspace(0, order.size - 1, min(n, order.size))).astype(int))
-        return [int(order[i]) for i in pick]
+        r = self.radius[ok]
+        picked: list[int] = []
+        for target in np.linspace(r.min(), r.max(), n):
+            free = [i for i in range(ok.size) if not any(
+                abs(r[i] - self.radius[j]) < 0.02 for j in picked)]
+            if not free:
+                break
+            picked.append(int(ok[min(free, key=lambda i: abs(r[i] - target))]))
+        return sorted(picked, key=lambda j: self.radius[j])
 
 
 def field_mtf(image, rois=None, *, reference=None, pixel_pitch: float | None = None,

@@ -10,13 +10,20 @@ writes it out (after Burns' ``sfrmat3``/``sfrmat4``):
    the fitted line. The rows are trimmed to a whole number of phase cycles of the slant.
 3. Projection: every pixel centre is projected onto the edge **normal** (signed distance
    ``(x - x_edge(row)) * cos(theta)``, theta = edge angle) and averaged into bins of width
-   ``1 / oversample`` pixel: the oversampled edge-spread function (ESF). Empty bins are linearly
-   interpolated.
-4. Line-spread function (LSF) = first difference of the ESF; a Hamming (or Tukey / no) window
-   centred on the LSF centroid; FFT; modulus normalised to 1 at zero frequency.
+   ``1 / oversample`` pixel: the oversampled edge-spread function (ESF). Each bin's mean is placed
+   at the mean position of its samples and interpolated back to the bin centres (uneven phase
+   filling at some tilts would otherwise ripple the MTF); empty bins are interpolated.
+4. Line-spread function (LSF) = first difference of the ESF, kept within
+   ``max(48 px, 10 edge widths)`` of the edge; a Hamming (or Tukey / no) window centred on the
+   edge; FFT; modulus normalised to 1 at zero frequency.
 5. Corrections: the two-point difference has the transfer ``sinc(f * delta)`` (ISO 12233 divides by
    it); averaging the pixels into bins of width ``delta`` is a box filter of the same width and
    transfer, which is divided out too (``correct_binning=True``; ISO's sfrmat does not).
+
+Beyond ISO 12233 (for noisy images, ``tail_smoothing=True``): the LSF tails beyond 2.5 edge
+widths (10-90 %) are low-passed (Gaussian, one pixel) before the FFT; this removes most of the
+high-frequency noise of the flat parts of the ESF and keeps the tails' area, so MTF[0] and the
+low frequencies stay unbiased.
 
 Frequencies are in cycles per pixel **along the edge normal**. For a rotationally symmetric PSF
 this is the radial MTF of the optics times the pixel-aperture transfer along that direction,
@@ -34,6 +41,9 @@ import numpy as np
 __all__ = ["EdgeMTF", "slanted_edge_mtf", "measure_edge", "mtf50", "mtf_at", "check_roi"]
 
 _WINDOWS = ("hamming", "tukey", "none")
+TAIL_CORE = 2.5  # LSF core kept unsmoothed: this many 10-90 % edge widths each side
+MAX_REACH = 48.0  # pixels of the LSF kept each side of the edge (at least 10 edge widths)
+TAIL_TAPER = 0.5  # blend from core to smoothed tails over this fraction of the core
 
 
 @dataclass(frozen=True)
@@ -204,10 +214,29 @@ def _smooth_tails(lsf: np.ndarray, mid: float, core: float, oversample: int) -> 
     from scipy.ndimage import gaussian_filter1d
 
     x = np.abs(np.arange(lsf.size) - mid)
-    t = np.clip((x - core) / core, 0.0, 1.0)
+    t = np.clip((x - core) / (TAIL_TAPER * core), 0.0, 1.0)
     keep = 0.5 * (1 + np.cos(np.pi * t))
     tail = gaussian_filter1d(lsf * (1 - keep), float(oversample), mode="constant")
     return lsf * keep + tail
+
+
+def _check_straight_edge(a: np.ndarray, c0: float, c1: float, roi) -> None:
+    """Every row must cross the fitted edge with a step of the same sign and similar size
+    (pixels 2-10 px either side of the line); a corner or several edges fail this."""
+    ny, nx = a.shape
+    x = np.arange(nx)[None, :]
+    off = x - (c0 + c1 * np.arange(ny))[:, None]
+    left = (off <= -2) & (off >= -10)
+    right = (off >= 2) & (off <= 10)
+    nl, nr = left.sum(axis=1), right.sum(axis=1)
+    if np.any(nl == 0) or np.any(nr == 0):
+        raise ValueError(f"the edge in roi {roi} leaves the roi: centre it and give it margin")
+    steps = (a * right).sum(axis=1) / nr - (a * left).sum(axis=1) / nl
+    steps = np.convolve(steps, np.ones(3) / 3, mode="valid")
+    typical = np.median(steps)
+    if typical == 0 or np.min(steps / typical) < 0.3:
+        raise ValueError(f"roi {roi} does not hold one straight edge across all its rows "
+                         f"(a corner or several edges?)")
 
 
 def _edge_contrast(a: np.ndarray) -> tuple[float, float]:
@@ -262,6 +291,7 @@ def measure_edge(image, roi=None, *, oversample: int = 4, window: str = "hamming
                          f"the noise {noise:.3g}")
 
     c0, c1 = _fit_edge(a)
+    _check_straight_edge(a, c0, c1, roi)
     ny, nx = a.shape
     angle = math.degrees(math.atan(c1))
     # whole number of phase cycles of the slant (sfrmat3), centred in the ROI
@@ -308,8 +338,12 @@ def measure_edge(image, roi=None, *, oversample: int = 4, window: str = "hamming
     lsf = np.diff(esf)
     lsf = lsf * np.sign(lsf.sum())
     mid, width = _lsf_centre_width(esf * np.sign(esf[-1] - esf[0]), oversample)
+    # far from the edge the ESF holds only noise: keep max(MAX_REACH px, 10 edge widths) a side
+    reach = max(MAX_REACH * oversample, 10.0 * width)
+    lo_b, hi_b = max(0, int(mid - reach)), min(lsf.size, int(math.ceil(mid + reach)) + 1)
+    lsf, mid = lsf[lo_b:hi_b], mid - lo_b
     if tail_smoothing:
-        lsf = _smooth_tails(lsf, mid, max(4.0 * width, 6.0 * oversample), oversample)
+        lsf = _smooth_tails(lsf, mid, max(TAIL_CORE * width, 4.0 * oversample), oversample)
     half = max(mid, lsf.size - 1 - mid)
     lsf_w = lsf * _window(lsf.size, mid, half, window)
 

@@ -2,8 +2,78 @@
 
 from __future__ import annotations
 
+import ast
+from pathlib import Path
+
 import typer
+
+
+def parse_scan_order(text: str, period: int) -> list[tuple[int, int]]:
+    """``row-major`` / ``serpentine`` / a Python list of (row, col) pairs → checked scan order.
+    ``period`` 0: a list sets its own period (sqrt of its length); names use 5."""
+    from metasensor.sensor.scan import check_scan_order, period_of
+
+    text = text.strip()
+    if text.startswith("["):
+        try:
+            order = ast.literal_eval(text)
+        except (ValueError, SyntaxError):
+            raise ValueError(
+                f"--scan-order: cannot parse {text!r} as a list of (row, col)") from None
+        if not isinstance(order, (list, tuple)):
+            raise ValueError(f"--scan-order: {text!r} is not a list of (row, col)")
+        return check_scan_order(order, period or period_of(order))
+    return check_scan_order(text, period or 5)
 
 
 def register(app: typer.Typer) -> None:
     """Add this stage's commands to app."""
+
+    @app.command("motion")
+    def motion_cmd(
+        views: Path = typer.Argument(..., help="input view stack (.tif/.zarr, nnum² pages)"),
+        out: Path = typer.Option(..., "--out", "-o", help="output view stack (.tif or .zarr)"),
+        scan_order: str = typer.Option(
+            "row-major", "--scan-order",
+            help='row-major, serpentine, or a list such as "[(0,0),(0,1),...]"'),
+        period: int = typer.Option(0, "--period",
+                                   help="scan period (default: from the stack's config, or 5)"),
+        reference: int = typer.Option(-1, "--reference",
+                                      help="index into the scan order to align to (-1: middle)"),
+        mode: str = typer.Option("object", "--mode", help="object (one flow) or turbulence"),
+        flow_view: str = typer.Option("centre", "--flow-view",
+                                      help="centre, sharpest, or u,v (object mode)"),
+        method: str = typer.Option("dis", "--method", help="dis or farneback (object mode)"),
+        scatter: str = typer.Option("linear", "--scatter", help="linear or cubic"),
+    ) -> None:
+        """Remove scan (grid) artefacts of moving objects or turbulence from a view stack.
+
+        Example: metasensor motion views.tif --scan-order serpentine --out corrected.tif
+        """
+        import numpy as np
+
+        from metasensor.io.views import read_config_from_views, read_views, write_views
+        from metasensor.motion.correct import correct_motion_views
+
+        cfg = read_config_from_views(views) if Path(views).exists() else None
+        stack = np.asarray(read_views(views))
+        p = period or (cfg.scan if cfg is not None else 0)
+        order = parse_scan_order(scan_order, p)
+        if flow_view in ("centre", "center"):
+            fv = None
+        elif flow_view == "sharpest":
+            fv = "sharpest"
+        else:
+            try:
+                u, v = (int(a) for a in flow_view.split(","))
+            except ValueError:
+                raise ValueError(f"--flow-view must be centre, sharpest or u,v; got {flow_view!r}"
+                                 ) from None
+            if not (0 <= u < stack.shape[0] and 0 <= v < stack.shape[1]):
+                raise ValueError(f"--flow-view {flow_view} is outside the {stack.shape[0]}² views")
+            fv = (u, v)
+        ref = None if reference < 0 else reference
+        result = correct_motion_views(stack, order, reference=ref, flow_view=fv, mode=mode,
+                                      method=method, scatter=scatter)
+        write_views(out, result, cfg, extra={"motion_corrected": True, "scan_order": order})
+        typer.echo(f"wrote {out}")

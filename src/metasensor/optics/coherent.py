@@ -1,21 +1,28 @@
-"""Coherent field of a point source at the image (MLA) plane, by a matrix Fourier transform.
+"""Coherent field of a point source at the image (MLA) plane.
 
 ``U(r) = ∫ P(rho) exp(−i 2π (NA/λ) rho·r) d²rho`` (docs/conventions.md: a *forward* transform,
-so a positive Noll-2 tilt moves the field along +x). The pupil is sampled on its own grid
-(radius ``radius`` samples) and the transform is evaluated directly on any centred output grid
-of pitch ``dx`` as two matrix products (a "matrix Fourier transform", as in prysm or poppy;
-hand-written here in torch so it runs on CPU or CUDA). Unlike a zero-padded FFT the output is
-not wrapped around: light beyond the output grid is simply not represented, and the pupil
-sampling does not depend on the output grid.
+so a positive Noll-2 tilt moves the field along +x). Two exact evaluations of the same sum over
+pupil samples, whichever is cheaper for the requested output grid (hand-written in torch, so it
+runs on CPU or CUDA; the MFT is the "matrix Fourier transform" of prysm or poppy):
+
+- ``"fft"``: the pupil is sampled on the frequency grid of an odd ``n_fft``-point FFT of pitch
+  ``dx`` (padded so the pupil radius has >= 96 samples) and the centre ``n × n`` is kept;
+- ``"mft"``: the pupil on its own grid, transformed onto the ``n × n`` output grid by two
+  matrix products (best for finely sampled, small windows).
+
+Either way the pupil radius has at least ``max(96, 2.2 max|∇W| + 8)`` samples (Nyquist for the
+wavefront's steepest slope) and the output is not wrapped around inside the window: light
+beyond it is simply not represented.
 
 Normalisation: output samples are amplitudes whose squares are the fraction of a unit point's
 photons in each ``dx × dx`` cell: ``sum |U|² = sum A² / sum A0²`` over the whole plane, A0 the
-clear circular pupil sampled the same way.
+clear circular pupil sampled the same way (1 for the clear pupil).
 """
 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 import torch
@@ -23,49 +30,85 @@ import torch
 from metasensor.config import SystemConfig
 from metasensor.optics.pupil import disk_fraction, pupil_amplitude, pupil_grid, pupil_phase
 
-__all__ = ["pupil_samples", "point_field", "pupil_radius_samples"]
+__all__ = ["FieldPlan", "plan_field", "pupil_samples", "point_field", "next_fast_odd"]
+
+MIN_PUPIL_RADIUS = 96.0
 
 
-def pupil_radius_samples(cfg: SystemConfig, extent: float, grad_max: float) -> float:
-    """Pupil radius in samples for an output window of width ``extent`` [m] and a wavefront
-    whose gradient reaches ``grad_max`` waves per unit rho: at least 96 samples, 4 samples
-    per wave of phase, and an MFT period ``radius·λ/NA`` 10 % wider than the window."""
-    return max(96.0, 4.0 * grad_max + 8.0, 1.1 * extent * cfg.na / cfg.wavelength)
+def next_fast_odd(n: int) -> int:
+    """Smallest odd integer >= n whose prime factors are 3, 5, 7, 11 (fast FFT sizes)."""
+    m = max(1, int(n)) | 1
+    while True:
+        k = m
+        for p in (3, 5, 7, 11):
+            while k % p == 0:
+                k //= p
+        if k == 1:
+            return m
+        m += 2
 
 
-def pupil_samples(cfg: SystemConfig, radius: float, zernike=None, depth: float = 0.0,
+@dataclass(frozen=True)
+class FieldPlan:
+    """How to evaluate the field: method, pupil radius [samples] and pupil grid size."""
+
+    method: str
+    radius: float
+    pupil_n: int
+
+
+def plan_field(cfg: SystemConfig, n: int, dx: float, grad_max: float) -> FieldPlan:
+    """Choose FFT or MFT for an ``n × n`` output grid of pitch ``dx`` [m] (odd n)."""
+    scale = cfg.na / cfg.wavelength * dx  # pupil radius [samples] per FFT sample
+    r_min = max(MIN_PUPIL_RADIUS, 2.2 * grad_max + 8.0)
+    n_fft = next_fast_odd(max(n, math.ceil(r_min / scale)))
+    r_mft = max(r_min, 1.1 * n * scale)  # MFT period radius·λ/NA 10 % wider than the window
+    m_mft = 2 * math.ceil(r_mft) + 3
+    cost_fft = 2.0 * n_fft**2 * math.log2(n_fft)
+    cost_mft = float(m_mft) * n * (m_mft + n)
+    if cost_mft < cost_fft:
+        return FieldPlan("mft", r_mft, m_mft)
+    return FieldPlan("fft", n_fft * scale, n_fft)
+
+
+def pupil_samples(cfg: SystemConfig, plan: FieldPlan, zernike=None, depth: float = 0.0,
                   phase=None, amplitude=None):
-    """Pupil amplitude and wavefront on an odd grid of ``radius`` samples in pupil radius.
+    """Pupil amplitude and wavefront on the plan's grid.
 
     Returns ``(a, w, norm)``: amplitude (edge cells area-weighted), wavefront in waves (0
     outside the pupil) and the energy ``sum A0²`` of the clear reference pupil.
     """
-    m = 2 * math.ceil(radius) + 3
-    rx, ry = pupil_grid(m, radius)
-    step = 1.0 / radius
+    rx, ry = pupil_grid(plan.pupil_n, plan.radius)
+    step = 1.0 / plan.radius
     a = pupil_amplitude(cfg, rx, ry, step, amplitude)
-    w = pupil_phase(cfg, rx, ry, zernike, depth, phase)
-    w = np.where(a > 0, w, 0.0)
+    inside = a > 0
+    w = np.zeros(a.shape)
+    w[inside] = pupil_phase(cfg, rx[inside], ry[inside], zernike, depth, phase)
     if not np.isfinite(w).all():
         raise ValueError("pupil phase is not finite inside the pupil")
     norm = float(np.sum(disk_fraction(rx, ry, step) ** 2))
     return a, w, norm
 
 
-def point_field(cfg: SystemConfig, a: np.ndarray, w: np.ndarray, norm: float, radius: float,
+def point_field(cfg: SystemConfig, plan: FieldPlan, a: np.ndarray, w: np.ndarray, norm: float,
                 n: int, dx: float, device, dtype=torch.complex64) -> torch.Tensor:
     """Field of a unit point at the centre sample ``n // 2`` of an ``n × n`` grid of pitch dx.
 
-    ``a, w, norm, radius`` from :func:`pupil_samples`. Returns a complex tensor on ``device``.
+    ``a, w, norm`` from :func:`pupil_samples` with the same plan. Complex tensor on device.
     """
-    m = a.shape[0]
-    df = cfg.na / cfg.wavelength / radius  # pupil sample spacing in spatial frequency [1/m]
-    f = (np.arange(m) - m // 2) * df
-    x = (np.arange(n) - n // 2) * dx
-    kernel = np.exp(-2j * np.pi * np.outer(x, f))  # (n, m)
-    e = torch.as_tensor(kernel, dtype=torch.complex128, device=device)
     p = torch.polar(torch.as_tensor(a, dtype=torch.float64),
                     torch.as_tensor(2 * np.pi * w, dtype=torch.float64)).to(device)
+    m = plan.pupil_n
+    if plan.method == "fft":
+        u = torch.fft.fftshift(torch.fft.fft2(torch.fft.ifftshift(p)))
+        c, h = m // 2, n // 2
+        u = u[c - h:c + h + 1, c - h:c + h + 1] / (m * math.sqrt(norm))
+        return u.to(dtype)
+    df = cfg.na / cfg.wavelength / plan.radius  # pupil sample spacing [1/m]
+    f = (np.arange(m) - m // 2) * df
+    x = (np.arange(n) - n // 2) * dx
+    e = torch.as_tensor(np.exp(-2j * np.pi * np.outer(x, f)), dtype=torch.complex128,
+                        device=device)
     u = e @ p @ e.T  # rows y, columns x
     u *= df * dx / math.sqrt(norm)
     return u.to(dtype)

@@ -12,12 +12,14 @@ angular-spectrum propagation over ``mla_focal`` (FFT) -> ``|.|²`` -> integrate 
 pixels (sum ``oversample²`` samples) -> regroup pixel (u, v) of lenslet block m into view (u, v)
 at displacement ``m·nnum − s``.
 
-The simulation grid holds an odd number L of whole lenslets per axis (periodic with the lenslet
-array, symmetric about the central lenslet's centre): enough for the largest ray displacement
-``(λ/NA) max|∇W|`` plus a diffraction margin of 12 λ/NA (the Airy pattern holds 99.2 % of its
-energy inside that radius), plus one guard lenslet per side, and at least
-``mla_focal·λ/dx²`` samples (angular-spectrum sampling condition). Point positions are batched
-on torch (CPU or CUDA, same code).
+Window and grid: the default K is the smallest odd window keeping >= 99.5 % of the light the
+lenslets collect, predicted from the widefield intensity (searched out to the largest ray
+displacement ``(λ/NA) max|∇W|`` plus 30 λ/NA) convolved with one lenslet aperture, plus 2 px per
+side for the cross-talk. The simulation grid holds an odd number L of whole lenslets per axis
+(periodic with the lenslet array, symmetric about the central lenslet's centre): those whose
+pixels reach the window plus one margin lenslet per side (light outside the grid is dropped, and
+the periodic wrap-around lands in the margin), and at least ``mla_focal·λ/dx²`` samples
+(angular-spectrum sampling condition). Point positions are batched on torch (CPU or CUDA).
 
 Normalisation (photons): a unit point source fills the pupil; ``sum |U0|² = sum A² / sum A0²``
 over the plane, A0 the clear disk (1 for the clear pupil, ``1 − obstruction²`` for an annulus).
@@ -29,8 +31,8 @@ its aperture)``, less the light outside the window.
 from __future__ import annotations
 
 import math
-import warnings
 from collections.abc import Callable
+from pathlib import Path
 
 import numpy as np
 import torch
@@ -38,14 +40,13 @@ import torch
 from metasensor.backend import resolve_device
 from metasensor.config import SystemConfig
 from metasensor.optics import cache as _cache
-from metasensor.optics.coherent import point_field, pupil_radius_samples, pupil_samples
-from metasensor.optics.pupil import disk_fraction, pupil_phase
+from metasensor.optics.coherent import next_fast_odd, plan_field, point_field, pupil_samples
+from metasensor.optics.pupil import disk_fraction, pupil_amplitude, pupil_phase
 
 __all__ = ["view_psfs", "widefield_psf", "PSF_CODE_VERSION", "ENERGY_CUT"]
 
 PSF_CODE_VERSION = "psf-1"
 ENERGY_CUT = 0.005  # default windows keep >= 99.5 % of the energy
-TAIL_LAMBDA_NA = 12.0  # diffraction margin (in λ/NA) around the geometric ray bundle
 
 PupilFn = Callable[[np.ndarray, np.ndarray], np.ndarray]
 
@@ -79,17 +80,22 @@ def _check_depth(depth) -> float:
 
 
 # ----------------------------------------------------------------------------- helpers
-def _grad_max(cfg: SystemConfig, zernike, depth: float, phase: PupilFn | None) -> float:
-    """max over the pupil of |∇W| in waves per unit rho (numerical gradient, 257² grid)."""
-    if zernike is None and depth == 0 and phase is None:
-        return 0.0
+def _reference_pupil(cfg: SystemConfig, zernike, depth: float, phase: PupilFn | None,
+                     amplitude) -> tuple[np.ndarray, np.ndarray, float]:
+    """The pupil evaluated on a fixed 257² grid over [-1.02, 1.02]²: amplitude, wavefront
+    [waves], and max over the pupil of |∇W| in waves per unit rho (numerical gradient).
+
+    The arrays key the cache (everything the bank depends on, before any heavy work)."""
     n = 257
     t = np.linspace(-1.02, 1.02, n)
     rx, ry = np.meshgrid(t, t, indexing="xy")
+    a = pupil_amplitude(cfg, rx, ry, t[1] - t[0], amplitude)
+    if zernike is None and depth == 0 and phase is None:
+        return a, np.zeros_like(a), 0.0
     w = pupil_phase(cfg, rx, ry, zernike, depth, phase)
     gy, gx = np.gradient(w, t[1] - t[0])
     inside = rx**2 + ry**2 <= 1.0
-    return float(np.nanmax(np.hypot(gx, gy)[inside]))
+    return a, np.where(a > 0, w, 0.0), float(np.nanmax(np.hypot(gx, gy)[inside]))
 
 
 def _ray_reach(cfg: SystemConfig, grad_max: float) -> float:
@@ -176,7 +182,9 @@ def view_psfs(cfg: SystemConfig, zernike=None, depth: float = 0.0, *,
     cfg : the system.
     zernike : Noll coefficient vector in waves (``z[j-1]`` = mode j), or None.
     depth : defocus of the point on the image side [m]; > 0 focused in front of the MLA.
-    phase : optional ``f(rho_x, rho_y) -> waves`` added to the Zernike wavefront.
+    phase : optional ``f(rho_x, rho_y) -> waves`` added to the Zernike wavefront; called with
+        arrays of pupil coordinates of any shape (e.g. 1-D: the samples inside the pupil),
+        must return that shape.
     amplitude : pupil amplitude: None (clear circle, annulus if ``cfg.obstruction``), an
         ``(nnum, nnum)`` map in view coordinates (nearest view), or ``f(rho_x, rho_y)``.
     subsample : odd; point positions every ``pixel_pitch / subsample``, output sampled at that
@@ -186,9 +194,12 @@ def view_psfs(cfg: SystemConfig, zernike=None, depth: float = 0.0, *,
         with the pixel grid, ``H_sub[..., c::s, c::s] * s²`` (c = (K·s)//2 % s), equals the
         subsample=1 bank and ``H_sub.sum() ≈ H_1.sum()``.
     size : K, odd number of pixels per axis (None: the smallest K keeping >= 99.5 % of the
-        energy, measured on the simulation).
+        light, see the module docstring).
     device : torch device (None: CUDA if available, else CPU).
-    cache : True (default cache folder), False (bypass) or a folder path.
+    cache : True (default cache folder, see :mod:`metasensor.optics.cache`), False (bypass) or
+        a folder path. The key hashes the code version, ``cfg.optical_digest()`` (not the scan),
+        the pupil amplitude and wavefront evaluated on a fixed 257² grid, depth, subsample, size
+        and oversample.
     oversample : simulation samples per pixel per axis (odd multiple of subsample; default >= 3).
     """
     z = _check_zernike(zernike)
@@ -200,46 +211,73 @@ def view_psfs(cfg: SystemConfig, zernike=None, depth: float = 0.0, *,
         raise ValueError(f"oversample {os_} must be a multiple of subsample {sub}")
     dev = resolve_device(device)
     dx = cfg.pixel_pitch / os_
-    nnum = cfg.nnum
-    gmax = _grad_max(cfg, z, depth, phase)
-    reach = _ray_reach(cfg, gmax) + TAIL_LAMBDA_NA * cfg.wavelength / cfg.na
-    m_need = math.ceil(reach / cfg.mla_pitch + 0.5)
-    if size is not None:
-        m_need = max(m_need, math.ceil((size / nnum - 1) / 2))
-    lenslets = 2 * m_need + 3
-    while lenslets * nnum * os_ < cfg.mla_focal * cfg.wavelength / dx**2:
-        lenslets += 2
-    n = lenslets * nnum * os_
-    radius = pupil_radius_samples(cfg, n * dx, gmax)
-    a, w, norm = pupil_samples(cfg, radius, z, depth, phase, amplitude)
-
-    folder = None if cache is True or cache is False else __import__("pathlib").Path(cache)
+    a_ref, w_ref, gmax = _reference_pupil(cfg, z, depth, phase, amplitude)
+    folder = None if cache is True or cache is False else Path(cache)
     key = None
     if cache is not False:
-        key = _cache.cache_key(PSF_CODE_VERSION, "view_psfs", cfg.digest(), a.astype(np.float32),
-                               w.astype(np.float32), radius, depth, sub, size, os_, n)
+        key = _cache.cache_key(PSF_CODE_VERSION, "view_psfs", cfg.optical_digest(),
+                               a_ref.astype(np.float32), w_ref.astype(np.float32), depth, sub,
+                               size, os_)
         hit = _cache.load(key, folder)
         if hit is not None:
             return hit
 
-    u0 = point_field(cfg, a, w, norm, radius, n, dx, dev)
-    bank = _simulate_bank(cfg, u0, os_, sub, lenslets, dev)
-    kmax = (lenslets - 2) * nnum  # exclude the guard lenslets (wrap-around)
     if size is None:
-        energy = bank.sum(axis=(0, 1))
-        size, kept = _window_size(energy, sub, kmax)
-        if kept < 1 - ENERGY_CUT:
-            warnings.warn(f"view_psfs: window of {size} px keeps only {kept:.4f} of the energy",
-                          stacklevel=2)
-    out = np.ascontiguousarray(_crop(bank, size * sub), dtype=np.float32)
+        size = _default_size(cfg, z, depth, phase, amplitude, gmax, dev)
+    lenslets, n = _grid(cfg, size, os_)
+    plan = plan_field(cfg, n, dx, gmax)
+    a, w, norm = pupil_samples(cfg, plan, z, depth, phase, amplitude)
+    u0 = point_field(cfg, plan, a, w, norm, n, dx, dev)
+    out = _simulate_bank(cfg, u0, os_, sub, lenslets, size, dev)
     if key is not None:
         _cache.store(key, out, folder)
     return out
 
 
-def _simulate_bank(cfg, u0: torch.Tensor, os_, sub, lenslets, dev) -> np.ndarray:
-    """Full bank on the whole simulated grid, (nnum, nnum, L·nnum·sub, L·nnum·sub), from the
-    field ``u0`` (n, n) of a point at the centre of the central lenslet."""
+def _default_size(cfg, z, depth, phase, amplitude, gmax, dev) -> int:
+    """Smallest odd K whose window keeps >= 99.5 % of the light through the lenslets, from the
+    widefield intensity (pixel sampling) convolved with one lenslet's aperture (the light a
+    lenslet at displacement d collects), plus 2 px per side for the cross-talk."""
+    from scipy.signal import fftconvolve
+
+    p = cfg.pixel_pitch
+    npix = 2 * math.ceil((_ray_reach(cfg, gmax) + 30.0 * cfg.wavelength / cfg.na) / p) + 1
+    pix, _ = _widefield_pixels(cfg, z, depth, phase, amplitude, p, npix, gmax, dev)
+    c = cfg.nnum // 2
+    t = (np.arange(cfg.nnum) - c) * p / (cfg.lenslet_diameter / 2)
+    gx, gy = np.meshgrid(t, t, indexing="xy")
+    if cfg.lenslet_aperture == "circular":
+        ap = disk_fraction(gx, gy, 2 * p / cfg.lenslet_diameter)
+    else:
+        ap = ((np.abs(gx) <= 1) & (np.abs(gy) <= 1)).astype(float)
+    energy = np.clip(fftconvolve(pix, ap, mode="same"), 0, None)
+    k, _ = _window_size(energy, 1, npix)
+    return k + 4
+
+
+def _grid(cfg: SystemConfig, size: int, os_: int) -> tuple[int, int]:
+    """(lenslets L per axis, samples n per axis) of the simulation grid for a K = size window:
+    the lenslets whose pixels reach the window plus one margin lenslet per side (cross-talk; the
+    wrap-around of the periodic grid lands in the margin), and n >= mla_focal·λ/dx²; L is
+    rounded up to an 11-smooth odd number (fast FFT sizes)."""
+    nnum = cfg.nnum
+    dx = cfg.pixel_pitch / os_
+    lenslets = 2 * ((size // 2 + nnum // 2) // nnum + 1) + 1
+    while lenslets * nnum * os_ < cfg.mla_focal * cfg.wavelength / dx**2:
+        lenslets += 2  # angular-spectrum sampling condition z <= N dx² / λ
+    lenslets = next_fast_odd(lenslets)  # 11-smooth: fast FFT sizes
+    return lenslets, lenslets * nnum * os_
+
+
+def _batch_size(n: int, npos: int, dev: torch.device) -> int:
+    """Point positions per batch: ~384 MiB of complex work arrays on CPU, 4 GiB on CUDA."""
+    budget = (4 << 30) if dev.type == "cuda" else (384 << 20)
+    return max(1, min(npos, budget // (n * n * 8 * 3)))
+
+
+def _simulate_bank(cfg, u0: torch.Tensor, os_, sub, lenslets, size, dev) -> np.ndarray:
+    """Bank (nnum, nnum, K·sub, K·sub) from the field ``u0`` (n, n) of a point at the centre of
+    the central lenslet, on a grid of ``lenslets`` lenslets per axis (K = size)."""
     nnum = cfg.nnum
     n = u0.shape[0]
     dx = cfg.pixel_pitch / os_
@@ -247,39 +285,42 @@ def _simulate_bank(cfg, u0: torch.Tensor, os_, sub, lenslets, dev) -> np.ndarray
     mla = tile.repeat(lenslets, lenslets)
     hz = torch.as_tensor(_transfer(n, dx, cfg.mla_focal, cfg.wavelength),
                          dtype=torch.complex64, device=dev)
-    half = (nnum * sub) // 2
-    offs = np.arange(-half, half + 1)
-    sy, sx = (g.ravel() for g in np.meshgrid(offs, offs, indexing="ij"))
+    npos = nnum * sub  # point positions per axis, s = half − i for i = 0 .. npos − 1
+    half = npos // 2
     step = os_ // sub  # grid samples per fine position
-    full = lenslets * nnum * sub
-    cf = full // 2
-    bank = torch.zeros((nnum, nnum, full, full), dtype=torch.float32, device=dev)
+    kf = size * sub
+    cf = kf // 2
+    # one extra row and column collect the blocks that fall outside the window
+    bank = torch.zeros((nnum, nnum, kf + 1, kf + 1), dtype=torch.float32, device=dev)
     mrange = (np.arange(lenslets) - lenslets // 2) * nnum * sub
-    budget = (2 << 30) if dev.type == "cuda" else (128 << 20)
-    batch = max(1, min(len(sy), budget // (n * n * 8 * 3)))
-    big = u0.repeat(2, 2)  # periodic copy: a shifted field is a window of it (no torch.roll)
-    work = torch.empty((batch, n, n), dtype=torch.complex64, device=dev)
+    # U0(r − s) for every s as one strided view of a periodic copy of U0 pre-shifted by
+    # +half·step: position (i, j) (s = (half − i, half − j)) starts at (i·step, j·step)
+    big = torch.roll(u0, (half * step, half * step), (0, 1)).repeat(2, 2).contiguous()
+    shifted = torch.as_strided(big, (npos, npos, n, n), (step * 2 * n, step, 2 * n, 1))
+    rows = max(1, _batch_size(n, npos * npos, dev) // npos)
+    offs = half - np.arange(npos)
     from tqdm.auto import tqdm
 
-    starts = range(0, len(sy), batch)
-    for s0 in tqdm(starts, desc="view PSFs", disable=None if len(starts) > 4 else True,
+    starts = range(0, npos, rows)
+    for r0 in tqdm(starts, desc="view PSFs", disable=None if len(starts) > 4 else True,
                    leave=False):
-        by, bx = sy[s0:s0 + batch], sx[s0:s0 + batch]
-        b = len(by)
-        u = work[:b]
-        for i in range(b):  # point at s: U0(r - s), times the lenslet array, in one pass
-            oy, ox = (-int(by[i]) * step) % n, (-int(bx[i]) * step) % n
-            torch.mul(big[oy:oy + n, ox:ox + n], mla, out=u[i])
+        r1 = min(npos, r0 + rows)
+        u = torch.mul(shifted[r0:r1], mla).reshape(-1, n, n)  # the point at s, times the MLA
         u = torch.fft.ifft2(torch.fft.fft2(u).mul_(hz))
         ri = torch.view_as_real(u)
         inten = ri[..., 0].square()
         inten.addcmul_(ri[..., 1], ri[..., 1])
         pix = _bin(inten, os_)
+        b = pix.shape[0]
         blocks = pix.reshape(b, lenslets, nnum, lenslets, nnum).permute(2, 4, 0, 1, 3)
-        iy = torch.as_tensor(cf + mrange[None, :] - by[:, None], device=dev)[:, :, None]
-        ix = torch.as_tensor(cf + mrange[None, :] - bx[:, None], device=dev)[:, None, :]
+        by = np.repeat(offs[r0:r1], npos)
+        bx = np.tile(offs, r1 - r0)
+        iy = cf + mrange[None, :] - by[:, None]
+        ix = cf + mrange[None, :] - bx[:, None]
+        iy = torch.as_tensor(np.where((iy >= 0) & (iy < kf), iy, kf), device=dev)[:, :, None]
+        ix = torch.as_tensor(np.where((ix >= 0) & (ix < kf), ix, kf), device=dev)[:, None, :]
         bank[:, :, iy, ix] = blocks
-    bank /= sub * sub
+    bank = bank[:, :, :kf, :kf] / (sub * sub)
     return bank.cpu().numpy()
 
 
@@ -317,23 +358,29 @@ def widefield_psf(cfg: SystemConfig, zernike=None, depth: float = 0.0, sampling=
             or not (math.isfinite(sampling) and sampling > 0):
         raise ValueError(f"sampling must be a positive pixel size in metres, got {sampling!r}")
     dev = resolve_device(device)
-    lam_na = cfg.wavelength / cfg.na
-    os_ = 3
-    while sampling / os_ > 0.9 * lam_na / 4:  # intensity band limit 2NA/λ at Nyquist
-        os_ += 2
-    dx = sampling / os_
-    gmax = _grad_max(cfg, z, depth, phase)
+    gmax = _reference_pupil(cfg, z, depth, phase, amplitude)[2]
     if size is None:  # search window: the ray bundle plus 30 λ/NA
-        npix = 2 * math.ceil((_ray_reach(cfg, gmax) + 30.0 * lam_na) / sampling) + 1
+        reach = _ray_reach(cfg, gmax) + 30.0 * cfg.wavelength / cfg.na
+        npix = 2 * math.ceil(reach / sampling) + 1
     else:
         npix = size
-    n = npix * os_
-    radius = pupil_radius_samples(cfg, n * dx, gmax)
-    a, w, norm = pupil_samples(cfg, radius, z, depth, phase, amplitude)
-    u0 = point_field(cfg, a, w, norm, radius, n, dx, dev, dtype=torch.complex128)
-    inten = u0.real.square() + u0.imag.square()
-    pix = _bin(inten, os_).cpu().numpy()
+    pix, total = _widefield_pixels(cfg, z, depth, phase, amplitude, sampling, npix, gmax, dev)
     if size is None:
-        total = float(np.sum(a**2) / norm)  # all the light reaching the image plane
         size, _ = _window_size(pix, 1, npix, total=total)
     return np.ascontiguousarray(_crop(pix, size), dtype=np.float32)
+
+
+def _widefield_pixels(cfg, z, depth, phase, amplitude, sampling, npix, gmax, dev):
+    """(npix, npix) float64 photon fractions on pixels of side ``sampling``, and the total
+    light reaching the image plane (sum A² / sum A0²)."""
+    lam_na = cfg.wavelength / cfg.na
+    os_ = 3
+    while sampling / os_ > 0.9 * lam_na / 4:  # sample the intensity (band 2NA/λ) at Nyquist
+        os_ += 2
+    dx = sampling / os_
+    n = npix * os_
+    plan = plan_field(cfg, n, dx, gmax)
+    a, w, norm = pupil_samples(cfg, plan, z, depth, phase, amplitude)
+    u0 = point_field(cfg, plan, a, w, norm, n, dx, dev, dtype=torch.complex128)
+    pix = _bin(u0.real.square() + u0.imag.square(), os_).cpu().numpy()
+    return pix, float(np.sum(a**2) / norm)

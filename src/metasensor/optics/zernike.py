@@ -135,14 +135,26 @@ def _as_coeffs(z, name: str = "zernike") -> np.ndarray:
 
 
 def wavefront(z, x, y) -> np.ndarray:
-    """Wavefront ``sum_j z[j-1] Z_j(x, y)`` in waves, same shape as x (float64)."""
+    """Wavefront ``sum_j z[j-1] Z_j(x, y)`` in waves, same shape as x (float64).
+
+    Accumulated mode by mode (memory of a few copies of x, not ``len(z)`` of them)."""
     z = _as_coeffs(z)
     x, y = _check_xy(x, y)
-    nz = np.flatnonzero(z)
-    if nz.size == 0:
-        return np.zeros(x.shape)
-    basis = zernike_basis(x, y, jmax=int(nz[-1]) + 1)
-    return np.tensordot(z[: nz[-1] + 1], basis, axes=1)
+    out = np.zeros(x.shape)
+    r2 = x * x + y * y
+    w = x + 1j * y
+    powers: dict[int, np.ndarray] = {0: np.ones(x.shape, dtype=complex)}
+    for j in np.flatnonzero(z) + 1:
+        n, m = noll_to_nm(int(j))
+        am = abs(m)
+        if am not in powers:
+            powers[am] = w**am
+        radial = np.zeros(x.shape)
+        for c, a in _radial_terms(n, am):
+            radial += c * r2**a
+        ang = powers[am].real if m >= 0 else powers[am].imag
+        out += (z[j - 1] * _norm(n, m)) * radial * ang
+    return out
 
 
 def _modes(modes: Iterable[int] | None, jmax: int) -> np.ndarray:

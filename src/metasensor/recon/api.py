@@ -54,7 +54,7 @@ class BlockTask:
 
     block: Block
     cfg: SystemConfig
-    views: Any  # the full view stack (NumPy or zarr), sliced lazily in the worker
+    views: Any  # the full view stack (NumPy or zarr, sliced lazily in the worker) or the window
     uv: list[tuple[int, int]]
     zernike: np.ndarray
     psf: np.ndarray | None
@@ -66,6 +66,7 @@ class BlockTask:
     pad: bool = True
     dao_kwargs: dict = field(default_factory=dict)
     progress: Any = None  # callable(n) for local runs only
+    windowed: bool = False  # ``views`` already holds just this block's window
 
 
 @dataclass
@@ -101,24 +102,34 @@ def reconstruct_block(task: BlockTask) -> BlockResult:
 
     cfg = task.cfg
     d = cfg.scan_step_px
-    window = _window(task.views, task.block, d)
+    window = (np.asarray(task.views, dtype=np.float32) if task.windowed
+              else _window(task.views, task.block, d))
     if not np.isfinite(window).all():
         raise ValueError(f"views contain NaN or infinite values in block {task.block.index}")
     zernike = np.asarray(task.zernike, dtype=np.float32)
     dao_history: list[float] = []
+    bank = task.psf
     if task.method in ("wave", "geometric"):
-        from metasensor.recon.dao import estimate_block_aberration
+        import importlib
 
+        dao = importlib.import_module("metasensor.recon.dao")  # lazily: the DAO stage's module
         init = zernike if np.any(zernike) else None
-        z_est, dao_history = estimate_block_aberration(window, cfg, method=task.method, init=init,
-                                                       device=task.device, **task.dao_kwargs)
+        geometric_bank = (task.method == "geometric" and bank is None and task.psf_fn is None
+                          and hasattr(dao, "run_dao") and hasattr(dao, "block_psfs"))
+        if geometric_bank:  # ideal PSFs translated by the measured shifts (never reshaped)
+            res = dao.run_dao(window, cfg, method="geometric", init=init, device=task.device,
+                              **task.dao_kwargs)
+            z_est, dao_history = res.zernike, res.history
+            bank = dao.block_psfs(cfg, res, device=task.device)
+        else:
+            z_est, dao_history = dao.estimate_block_aberration(
+                window, cfg, method=task.method, init=init, device=task.device,
+                **task.dao_kwargs)
         z_est = np.asarray(z_est, dtype=np.float32).ravel()
         zernike = np.zeros(max(zernike.size, z_est.size), np.float32)
         zernike[:z_est.size] = z_est
         dao_history = [float(h) for h in dao_history]
-    if task.psf is not None:
-        bank = task.psf
-    else:
+    if bank is None:
         bank = (task.psf_fn or _default_psfs)(cfg, zernike, task.device)
     bank = np.asarray(bank, dtype=np.float32)
     if bank.ndim != 4 or bank.shape[:2] != (cfg.nnum, cfg.nnum):
@@ -221,8 +232,11 @@ def reconstruct(views, cfg: SystemConfig, method: str = "isa", zernike=None, fie
         bar = tqdm(total=len(block_list) * iterations, desc="reconstruct", unit="it")
     local = scheduler is None or scheduler in ("threads", "sync")
     tick = bar.update if (bar is not None and local) else None
-    tasks = [BlockTask(b, cfg, views, uv, zern[b.index], psf, psf_fn, method, iterations,
-                       n_subsets, dev, pad, dict(dao_kwargs or {}), tick)
+    # a remote cluster gets each block's window of an in-memory stack, not the whole stack
+    ship = not local and isinstance(views, np.ndarray)
+    tasks = [BlockTask(b, cfg, _window(views, b, d) if ship else views, uv, zern[b.index], psf,
+                       psf_fn, method, iterations, n_subsets, dev, pad, dict(dao_kwargs or {}),
+                       tick, ship)
              for b in block_list]
     stitcher = Stitcher(shape, out)
     history = [[[] for _ in range(bx)] for _ in range(by)]

@@ -46,6 +46,9 @@ def read_psf_file(path: Path):
             attrs = dict(f["psf"].attrs) | dict(f.attrs)
     except OSError as exc:
         raise ValueError(f"{path}: not a readable HDF5 file ({exc})") from None
+    if int(np.ravel(attrs.get("subsample", 1))[0]) != 1:
+        raise ValueError(f"{path}: PSF bank sampled at pixel_pitch/{attrs['subsample']}; "
+                         "reconstruction needs subsample 1")
     cfg = None
     for key in ("config", "system", "cfg"):
         if key in attrs:
@@ -131,6 +134,8 @@ def register(app: typer.Typer) -> None:
             None, "--field-zernike", help=".npy (by, bx, J) Noll vectors over the field"),
         scheduler: str | None = typer.Option(None, help="dask scheduler address tcp://host:port"),
         device: str | None = typer.Option(None, help="cpu or cuda (default: cuda if present)"),
+        zarr_out: bool = typer.Option(False, "--zarr", help="also stitch into out/image.zarr "
+                                      "block by block (large fields)"),
     ) -> None:
         """Reconstruct the all-in-focus image from views (ISA; multisite blocks through Dask).
 
@@ -154,16 +159,27 @@ def register(app: typer.Typer) -> None:
             cfg = read_config_from_views(views)
         if cfg is None:
             raise ValueError(f"{views}: no system configuration stored; pass --config cfg.toml")
-        stack = read_views(views, nnum=cfg.nnum)
+        big = views.suffix.lower() != ".zarr" and views.stat().st_size > 2**29
+        stack = read_views(views, nnum=cfg.nnum, mmap=big)  # zarr: lazy, read block by block
         fz = None
         if field_zernike is not None:
             if not field_zernike.is_file():
                 raise FileNotFoundError(f"field Zernike file not found: {field_zernike}")
             fz = np.load(field_zernike)
+        target = None
+        if zarr_out:
+            import zarr
+
+            d = cfg.scan_step_px
+            shape = (stack.shape[2] * d, stack.shape[3] * d)
+            out.mkdir(parents=True, exist_ok=True)
+            target = zarr.open_array(str(out / "image.zarr"), mode="w", shape=shape,
+                                     chunks=(min(1024, shape[0]), min(1024, shape[1])),
+                                     dtype="f4", fill_value=0.0)
         rec = reconstruct(stack, cfg, method=method, zernike=parse_zernike(zernike),
                           field_zernike=fz, blocks=_parse_blocks(blocks), overlap=overlap,
                           iterations=iterations, device=device, psf=bank, subsets=subsets,
-                          scheduler=scheduler, progress=True)
+                          scheduler=scheduler, progress=True, out=target)
         written = write_outputs(out, rec, stack)
         typer.echo(f"reconstructed {rec.image.shape[0]}x{rec.image.shape[1]} px in "
                    f"{rec.seconds:.1f} s -> {', '.join(str(p) for p in written)}")

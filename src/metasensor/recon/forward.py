@@ -149,16 +149,20 @@ class PhaseSpaceOperator:
 
     # ------------------------------------------------------------------ setup
     def _otfs(self, psf: torch.Tensor) -> torch.Tensor:
+        """rfft2 of each PSF zero-padded to the domain, centre moved to (0, 0); a pruned
+        transform: along x only the K rows that hold the PSF, then along y."""
         ny, nx = self.geometry.domain
-        r = self.radius
-        out = torch.empty((self.n_views, ny, nx // 2 + 1), dtype=torch.complex64,
+        r, k = self.radius, self.k
+        out = torch.zeros((self.n_views, ny, nx // 2 + 1), dtype=torch.complex64,
                           device=self.device)
         for i in range(0, self.n_views, self.chunk):
             block = psf[i:i + self.chunk]
-            padded = torch.zeros((block.shape[0], ny, nx), device=self.device)
-            padded[:, :self.k, :self.k] = block
-            padded = torch.roll(padded, shifts=(-r, -r), dims=(-2, -1))
-            out[i:i + block.shape[0]] = torch.fft.rfft2(padded)
+            rows = torch.zeros((block.shape[0], k, nx), device=self.device)
+            rows[..., :k] = block
+            rows = torch.fft.rfft(torch.roll(rows, shifts=-r, dims=-1), dim=-1)
+            out[i:i + block.shape[0], :k] = rows
+            out[i:i + block.shape[0]] = torch.fft.fft(
+                torch.roll(out[i:i + block.shape[0]], shifts=-r, dims=-2), dim=-2)
         return out
 
     # ------------------------------------------------------------------ building blocks

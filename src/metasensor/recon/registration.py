@@ -176,7 +176,8 @@ def register_nonrigid_batch(movings: np.ndarray, reference: np.ndarray,
                             grid: tuple[int, int] = (15, 20), iterations: int = 200,
                             lr: float = 0.05, mask: np.ndarray | None = None,
                             levels: int = 3, device=None, init: np.ndarray | None = None,
-                            normalise: bool = True) -> np.ndarray:
+                            normalise: bool = True, batch_size: int = 16,
+                            progress: bool = False) -> np.ndarray:
     """Register many images to one reference (or to one reference each) at once.
 
     movings: ``(N, H, W)``; reference: ``(H, W)`` or ``(N, H, W)``; grid: ``(rows, cols)`` of
@@ -184,7 +185,9 @@ def register_nonrigid_batch(movings: np.ndarray, reference: np.ndarray,
     iterations: Adam steps per pyramid level; lr: Adam step size in pixels of the full-resolution
     image; mask: optional ``(H, W)`` or ``(N, H, W)`` weights (> 0 where the loss counts);
     levels: pyramid levels (factor 2 each, coarse to fine; 1 = single scale); init: optional
-    starting field ``(N, 2, H, W)`` or ``(N, 2, rows, cols)`` control values.
+    starting field ``(N, 2, H, W)`` or ``(N, 2, rows, cols)`` control values; batch_size:
+    images optimised together (memory bound; the images are independent, so the result does not
+    depend on it); progress: tqdm bar over the batches.
     Returns float32 ``(N, 2, H, W)`` shift fields ``(dy, dx)`` in pixels such that
     ``moving(y + dy, x + dx) ≈ reference(y, x)`` (see :func:`warp`). Pixels whose sample falls
     outside the moving image do not count in the loss.
@@ -201,8 +204,24 @@ def register_nonrigid_batch(movings: np.ndarray, reference: np.ndarray,
     if gy < 1 or gx < 1 or gy > h or gx > w:
         raise ValueError(
             f"grid must be (rows, cols) of control points within the image, got {grid}")
-    if iterations < 1 or lr <= 0 or levels < 1:
-        raise ValueError("iterations, lr and levels must be positive")
+    if iterations < 1 or lr <= 0 or levels < 1 or batch_size < 1:
+        raise ValueError("iterations, lr, levels and batch_size must be positive")
+    if n > batch_size:
+        from tqdm.auto import tqdm
+
+        def part(a, sl):
+            a = None if a is None else np.asarray(a)
+            return a[sl] if a is not None and a.ndim in (3, 4) and len(a) == n else a
+
+        out = []
+        starts = range(0, n, batch_size)
+        for i in tqdm(starts, desc="registration", unit="batch", disable=not progress):
+            sl = slice(i, i + batch_size)
+            out.append(register_nonrigid_batch(
+                movings[sl], part(reference, sl), grid=grid, iterations=iterations, lr=lr,
+                mask=part(mask, sl), levels=levels, device=device, init=part(init, sl),
+                normalise=normalise, batch_size=batch_size))
+        return np.concatenate(out)
     dev = resolve_device(device)
     mov = torch.as_tensor(np.array(movings, dtype=np.float32), device=dev)[:, None]
     ref = torch.as_tensor(np.array(reference, dtype=np.float32), device=dev)

@@ -42,6 +42,8 @@ def calibrate_cmd(
     order: str | None = typer.Option(None, "--order", help=f"scan order: {_ORDERS}"),
     moving: str = typer.Option("mla", "--moving", help="what moves during the scan: mla|image"),
     flat: bool = typer.Option(True, "--flat/--no-flat", help="also write the flat-field map"),
+    figure: Path | None = typer.Option(None, "--figure", help="PNG: fitted grid over the frame, "
+                                       "offsets against nominal"),
 ) -> None:
     """Calibrate the lenslet grid (pitch, rotation, centre, flat field, scan offsets).
 
@@ -75,6 +77,8 @@ def calibrate_cmd(
                              description="metasensor flat field (rectified, phase 0,0)")
         calib = calib.replace(flat=flat_name)
     calib.to_toml(out)
+    if figure is not None:
+        _calibration_figure(ref, calib, figure)
     typer.echo(f"pitch {calib.pitch:.4f} px, rotation {calib.rotation:+.4f} deg, centre "
                f"({calib.center[0]:.3f}, {calib.center[1]:.3f}) px, {calib.lenslets[0]}x"
                f"{calib.lenslets[1]} lenslets kept")
@@ -103,6 +107,8 @@ def realign_cmd(
     method: str = typer.Option("lanczos", "--method", help="interpolator: lanczos|spline|cubic"),
     apply_flat: bool = typer.Option(False, "--flat", help="divide by the calibration's flat "
                                     "field"),
+    dtype: str = typer.Option("float32", "--dtype", help="rectified views: float32, or input "
+                              "(round back to the raw integer type: half the memory)"),
 ) -> None:
     """Realign raw frames into view stacks (page u*nnum + v = view (u, v)).
 
@@ -120,6 +126,8 @@ def realign_cmd(
     from metasensor.sensor.realign import realign_sequence
     from metasensor.sensor.rectify import check_fits, rectify_frames
 
+    if dtype not in ("float32", "input"):
+        raise ValueError(f"--dtype must be float32 or input, got {dtype!r}")
     if offsets not in ("measure", "calib", "nominal"):
         raise ValueError(f"--offsets must be measure, calib or nominal, got {offsets!r}")
     if out.suffix.lower() not in (".tif", ".tiff", ".zarr"):
@@ -154,6 +162,8 @@ def realign_cmd(
                 off = "nominal"
             stream = rectify_frames(stream, calib, phases, offsets=off,
                                     start_phase=start_phase, method=method)
+            if dtype == "input" and raw.dtype.kind in "ui":
+                stream = _round_to(stream, raw.dtype)
         flat = None
         if apply_flat:
             flat = _flat(calib, calib_path, cfg)
@@ -171,6 +181,50 @@ def realign_cmd(
             written.append(path)
     typer.echo(f"-> {written[0]}" + (f" ... {written[-1]} ({len(written)} stacks)"
                                      if len(written) > 1 else ""))
+
+
+def _round_to(frames, dtype):
+    info = np.iinfo(dtype)
+    for frame in frames:
+        yield np.clip(np.rint(frame), info.min, info.max).astype(dtype)
+
+
+def _calibration_figure(frame: np.ndarray, calib, path: Path) -> None:
+    """Fitted lenslet centres over a central crop of the frame; measured - nominal offsets."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from metasensor.io.atomic import atomic_path
+
+    n = calib.nnum
+    a = calib.matrix * n
+    ii, jj = np.meshgrid(np.arange(calib.lenslets[0]), np.arange(calib.lenslets[1]),
+                         indexing="ij")
+    pts = np.asarray(calib.center)[:, None] + a @ np.stack([ii.ravel(), jj.ravel()])
+    cy, cx = (np.array(frame.shape) // 2).tolist()
+    half = 4 * n
+    fig, axes = plt.subplots(1, 2, figsize=(10, 4.6))
+    axes[0].imshow(frame[cy - half:cy + half, cx - half:cx + half], cmap="gray",
+                   extent=(cx - half - 0.5, cx + half - 0.5, cy + half - 0.5, cy - half - 0.5))
+    sel = (np.abs(pts[0] - cy) < half) & (np.abs(pts[1] - cx) < half)
+    axes[0].plot(pts[1, sel], pts[0, sel], "r+", ms=8)
+    axes[0].set_title(f"pitch {calib.pitch:.4f} px, rotation {calib.rotation:+.4f} deg")
+    err = calib.offset_errors()
+    phases = np.array(calib.scan_order)
+    axes[1].quiver(phases[:, 1], phases[:, 0], err[:, 1], err[:, 0], angles="xy",
+                   scale_units="xy", scale=max(1e-3, 2 * np.abs(err).max()))
+    axes[1].set_xlim(-0.5, calib.scan - 0.5)
+    axes[1].set_ylim(calib.scan - 0.5, -0.5)
+    axes[1].set_title("scan-phase offset, measured - nominal (max "
+                      f"{np.abs(err).max():.3f} px)")
+    axes[1].set_xlabel("phase column")
+    axes[1].set_ylabel("phase row")
+    fig.tight_layout()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=100)
+    plt.close(fig)
 
 
 def _flat(calib, calib_path, cfg):

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["gather_views", "have_numba"]
+__all__ = ["gather_views", "scatter_views", "gather_views_torch", "have_numba"]
 
 try:  # numba is optional: present through aotools, but the NumPy path always works
     import numba
@@ -32,6 +32,21 @@ try:  # numba is optional: present through aotools, but the NumPy path always wo
                     dst = out[u, v, y]
                     for j in range(lx):
                         dst[j * p + c] = src[j * n + v]
+
+    @numba.njit(parallel=True, nogil=True, cache=True)
+    def _scatter_numba(views, frames, tidx, offy, offx, n, p, ly, lx):  # pragma: no cover
+        for k in numba.prange(n * ly * p):
+            u = k // (ly * p)
+            y = k % (ly * p)
+            i = y // p
+            r = y % p
+            for c in range(p):
+                t = tidx[r, c]
+                dst = frames[t, offy[t] + i * n + u, offx[t]:]
+                for v in range(n):
+                    src = views[u, v, y]
+                    for j in range(lx):
+                        dst[j * n + v] = src[j * p + c]
 
     _HAVE_NUMBA = True
 except ImportError:  # pragma: no cover - environment dependent
@@ -55,30 +70,52 @@ def _gather_numpy(frames, out, order, offsets, n, p, ly, lx) -> None:
         out[:, :, r::p, c::p] = block.transpose(1, 3, 0, 2)
 
 
+def _use_numba(engine: str, src: np.ndarray, dst: np.ndarray) -> bool:
+    if engine not in ("auto", "numba", "numpy"):
+        raise ValueError(f"engine must be 'auto', 'numba' or 'numpy', got {engine!r}")
+    use = (engine != "numpy" and _HAVE_NUMBA and isinstance(src, np.ndarray)
+           and src.dtype == dst.dtype and src.dtype in _NUMBA_DTYPES
+           and (engine == "numba" or src.size >= _NUMBA_MIN_SIZE))
+    if engine == "numba" and not use:
+        raise ValueError("engine='numba' needs numba and arrays of a plain dtype")
+    return use
+
+
+def _tables(order, offsets, p):
+    tidx = np.zeros((p, p), dtype=np.int64)
+    for t, (r, c) in enumerate(order):
+        tidx[r, c] = t
+    offy = np.array([o[0] for o in offsets], dtype=np.int64)
+    offx = np.array([o[1] for o in offsets], dtype=np.int64)
+    return tidx, offy, offx
+
+
+def scatter_views(views: np.ndarray, frames: np.ndarray, order: list[tuple[int, int]],
+                  offsets: list[tuple[int, int]], n: int, p: int, ly: int, lx: int,
+                  engine: str = "auto") -> np.ndarray:
+    """The inverse of :func:`gather_views`: write the view samples back into the lenslet
+    blocks of ``frames`` ``(T, H, W)`` (other pixels untouched)."""
+    if not _use_numba(engine, views, frames):
+        for t, (r, c) in enumerate(order):
+            oy, ox = offsets[t]
+            block = views[:, :, r::p, c::p].transpose(2, 0, 3, 1).reshape(ly * n, lx * n)
+            frames[t, oy:oy + ly * n, ox:ox + lx * n] = block
+        return frames
+    _scatter_numba(np.ascontiguousarray(views), frames, *_tables(order, offsets, p), n, p, ly,
+                   lx)
+    return frames
+
+
 def gather_views(frames, out: np.ndarray, order: list[tuple[int, int]],
                  offsets: list[tuple[int, int]], n: int, p: int, ly: int, lx: int,
                  engine: str = "auto") -> np.ndarray:
     """Fill ``out`` ``(n, n, ly*p, lx*p)`` from ``frames`` (a ``(T, H, W)`` array or a sequence
     of ``T`` 2-D arrays) whose frame ``t`` has phase ``order[t]`` and block origin
     ``offsets[t]`` (rows, columns). ``engine``: ``"auto"``, ``"numba"`` or ``"numpy"``."""
-    if engine not in ("auto", "numba", "numpy"):
-        raise ValueError(f"engine must be 'auto', 'numba' or 'numpy', got {engine!r}")
-    use_numba = (
-        engine != "numpy" and _HAVE_NUMBA and isinstance(frames, np.ndarray)
-        and frames.dtype == out.dtype and frames.dtype in _NUMBA_DTYPES
-        and (engine == "numba" or out.size >= _NUMBA_MIN_SIZE)
-    )
-    if engine == "numba" and not use_numba:
-        raise ValueError("engine='numba' needs numba and a (T, H, W) array of a plain dtype")
-    if not use_numba:
+    if not _use_numba(engine, frames, out):
         _gather_numpy(frames, out, order, offsets, n, p, ly, lx)
         return out
-    tidx = np.zeros((p, p), dtype=np.int64)
-    for t, (r, c) in enumerate(order):
-        tidx[r, c] = t
-    offy = np.array([o[0] for o in offsets], dtype=np.int64)
-    offx = np.array([o[1] for o in offsets], dtype=np.int64)
-    _gather_numba(frames, out, tidx, offy, offx, n, p, ly, lx)
+    _gather_numba(frames, out, *_tables(order, offsets, p), n, p, ly, lx)
     return out
 
 

@@ -15,7 +15,7 @@ from collections.abc import Iterable, Iterator
 import numpy as np
 
 from metasensor.config import SystemConfig
-from metasensor.sensor.gather import gather_views
+from metasensor.sensor.gather import gather_views, scatter_views
 from metasensor.sensor.scan import check_scan_order
 
 __all__ = ["realign", "unrealign", "lenslet_counts", "realign_sequence", "phase_offsets"]
@@ -142,7 +142,8 @@ def _realign_torch(frames, cfg: SystemConfig, order, moving: str, margin: int):
 
 
 def unrealign(views, cfg: SystemConfig, scan_order=None, moving: str = "mla",
-              frame_shape: tuple[int, int] | None = None) -> np.ndarray:
+              frame_shape: tuple[int, int] | None = None, *, engine: str = "auto"
+              ) -> np.ndarray:
     """Views ``(nnum, nnum, Ly*p, Lx*p)`` → raw frames ``(T, H, W)``: the exact inverse of
     :func:`realign` on the lenslet blocks (pixels outside every block are zero).
 
@@ -164,11 +165,8 @@ def unrealign(views, cfg: SystemConfig, scan_order=None, moving: str = "mla",
             frame_shape[1] < lx * n + margin:
         raise ValueError(f"frame_shape {frame_shape} cannot hold {ly}x{lx} lenslets over the scan")
     frames = np.zeros((p * p, *frame_shape), dtype=views.dtype)
-    for t, (oy, ox) in enumerate(phase_offsets(order, cfg, moving)):
-        r, c = order[t]
-        block = views[:, :, r::p, c::p].transpose(2, 0, 3, 1).reshape(ly * n, lx * n)
-        frames[t, oy:oy + ly * n, ox:ox + lx * n] = block
-    return frames
+    return scatter_views(views, frames, order, phase_offsets(order, cfg, moving), n, p, ly, lx,
+                         engine=engine)
 
 
 def realign_sequence(frames: Iterable[np.ndarray], cfg: SystemConfig, scan_order=None,
@@ -182,7 +180,9 @@ def realign_sequence(frames: Iterable[np.ndarray], cfg: SystemConfig, scan_order
     ``t .. t+T-1`` and one view stack is yielded per frame from frame ``T-1`` on (N - T + 1
     stacks for N frames). ``sliding=False``: one stack per complete period (N must then be a
     multiple of T). Only the last T frames are held in memory (a ring buffer in which slot s
-    always holds the latest frame of phase ``order[s]``). Each yielded array is new.
+    always holds the latest frame of phase ``order[s]``); after the first window only the new
+    frame's phase is realigned into an internal stack, and a copy of it is yielded (a memory
+    copy plus 1/T of a realignment per frame). Each yielded array is new.
     """
     p, _, margin = _geometry(cfg, moving)
     order = check_scan_order(scan_order, p)
@@ -191,6 +191,7 @@ def realign_sequence(frames: Iterable[np.ndarray], cfg: SystemConfig, scan_order
         raise ValueError(f"start_phase must be an integer in 0..{tp - 1}, got {start_phase!r}")
     offsets = phase_offsets(order, cfg, moving)
     ring: np.ndarray | None = None
+    state: np.ndarray | None = None
     count = 0
     for f, frame in enumerate(frames):
         frame = np.asarray(frame)
@@ -204,12 +205,25 @@ def realign_sequence(frames: Iterable[np.ndarray], cfg: SystemConfig, scan_order
             raise ValueError(f"frame {f} is {frame.dtype} {frame.shape}, unlike the first frame "
                              f"({ring.dtype} {ring.shape[1:]})")
         _check_finite(frame[None], f"frame {f}")
-        ring[(f + start_phase) % tp] = frame
+        slot = (f + start_phase) % tp
+        ring[slot] = frame
         count = f + 1
-        if count >= tp and (sliding or count % tp == 0):
-            ly, lx = lenslet_counts(ring.shape[1:], cfg, moving)
-            out = np.empty((cfg.nnum, cfg.nnum, ly * p, lx * p), dtype=ring.dtype)
-            yield gather_views(ring, out, order, offsets, cfg.nnum, p, ly, lx, engine=engine)
+        if count < tp or not (sliding or count % tp == 0):
+            continue
+        n = cfg.nnum
+        ly, lx = lenslet_counts(ring.shape[1:], cfg, moving)
+        if sliding and state is not None:
+            # only the new frame's phase changed: replace its samples in the internal stack
+            (r, c), (oy, ox) = order[slot], offsets[slot]
+            block = frame[oy:oy + ly * n, ox:ox + lx * n].reshape(ly, n, lx, n)
+            state[:, :, r::p, c::p] = block.transpose(1, 3, 0, 2)
+            yield state.copy()
+            continue
+        out = np.empty((n, n, ly * p, lx * p), dtype=ring.dtype)
+        gather_views(ring, out, order, offsets, n, p, ly, lx, engine=engine)
+        if sliding:
+            state = out.copy()
+        yield out
     if count < tp:
         raise ValueError(f"got {count} frames but one {p}x{p} scan period needs {tp}")
     if not sliding and count % tp:

@@ -114,21 +114,23 @@ def _place(scene: np.ndarray, shape) -> np.ndarray:
 class _Banks:
     """Collapsed, cropped kernels per (component, frame), computed once per call."""
 
-    def __init__(self, cfg, device):
-        self.cfg, self.device, self._cache = cfg, device, {}
+    def __init__(self, cfg, device, upsample="spline", psf=None):
+        self.cfg, self.device, self.upsample, self._cache = cfg, device, upsample, {}
+        self.psf = kern.fine_view_bank if psf is None else psf
 
     def views(self, z, depth, phase=None, key=None):
         k = ("v", None if z is None else tuple(np.round(z, 12)), depth, key)
         if k not in self._cache:
-            fine = kern.fine_view_bank(self.cfg, z, depth, phase=phase, device=self.device)
-            self._cache[k] = kern.as_kernels(kern.crop_energy(kern.collapse(fine)), self.device)
+            fine = self.psf(self.cfg, z, depth, phase=phase, device=self.device)
+            coll = kern.collapse(fine, upsample=self.upsample)
+            self._cache[k] = kern.as_kernels(kern.crop_energy(coll), self.device)
         return self._cache[k]
 
     def widefield(self, z, depth, phase=None, key=None):
         k = ("w", None if z is None else tuple(np.round(z, 12)), depth, key)
         if k not in self._cache:
             fine = kern.fine_widefield(self.cfg, z, depth, phase=phase, device=self.device)
-            coll = kern.collapse(fine, integrate=True)
+            coll = kern.collapse(fine, integrate=True, upsample=self.upsample)
             self._cache[k] = kern.as_kernels(kern.crop_energy(coll), self.device)
         return self._cache[k]
 
@@ -151,7 +153,8 @@ def simulate(scene, cfg: SystemConfig, zernike=None, field_zernike=None, depth=N
              read_noise: float = 2.0, bit_depth: int | None = None, exposure: float = 0.8,
              scale: float | None = None, sensor_shape=None, field_blocks=(4, 4),
              depth_planes: int = 8, ao_segments: int = 15, comparison: bool = True,
-             device=None, progress: bool = False) -> Capture:
+             upsample: str = "spline", psf=None, device=None,
+             progress: bool = False) -> Capture:
     """Simulate one scan period of raw frames of ``scene`` (H, W) (see the module docstring).
 
     zernike: Noll vector [waves] for the whole field; field_zernike: (by, bx, J) vectors at block
@@ -162,6 +165,11 @@ def simulate(scene, cfg: SystemConfig, zernike=None, field_zernike=None, depth=N
     Poisson + Gaussian read noise (``read_noise`` e-); neither: noise-free but quantised.
     motion / turbulence: dynamics (:class:`Motion`, :class:`Turbulence`); seed: all randomness.
     comparison: also render the 2D sensor and hardware AO (``ao_segments``² tip-tilt mirror).
+    upsample: the continuous scene model behind the pixel array: ``"spline"`` (default, cubic
+    interpolation), ``"box"`` (uniform pixels) or ``"point"`` (a point source per pixel).
+    psf: optional provider ``psf(cfg, zernike, depth, phase=, device=) -> (nnum, nnum, Kf, Kf)``
+    of fine view banks in photons per unit point (default: ``view_psfs(subsample=3) · 9``),
+    e.g. measured PSFs.
     """
     if not isinstance(cfg, SystemConfig):
         raise TypeError(f"cfg must be a SystemConfig, got {type(cfg).__name__}")
@@ -200,14 +208,17 @@ def simulate(scene, cfg: SystemConfig, zernike=None, field_zernike=None, depth=N
     options = dict(zernike=zernike, field_zernike=field_zernike, depth=depth, motion=motion,
                    turbulence=turbulence, seed=seed, read_noise=read_noise, bit_depth=bits,
                    exposure=exposure, sensor_shape=sensor_shape, field_blocks=field_blocks,
-                   depth_planes=depth_planes, ao_segments=ao_segments, device=device)
+                   depth_planes=depth_planes, ao_segments=ao_segments, upsample=upsample,
+                   psf=psf, device=device)
 
     grid = None if field_zernike is None else field_grid(field_zernike, shape, field_blocks)
     comps, planes = build_components(shape, zernike, grid, depth, depth_planes)
     t_count = p * p
     screens = None if turbulence is None else turbulence.screens(t_count, seeds[3])
     tref = motion.reference_time(t_count) if motion is not None else (t_count - 1) / 2
-    banks = _Banks(cfg, dev)
+    if upsample not in kern.UPSAMPLERS:
+        raise ValueError(f"upsample must be one of {kern.UPSAMPLERS}, got {upsample!r}")
+    banks = _Banks(cfg, dev, upsample, psf)
     reference = scene if motion is None else motion.reference_scene(scene)
 
     # ---- clean views (scene units)

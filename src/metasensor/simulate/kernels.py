@@ -29,14 +29,28 @@ __all__ = ["SUBSAMPLE", "upsampler_response", "collapse", "crop_energy", "fine_v
 SUBSAMPLE = 3
 
 
-@functools.lru_cache(maxsize=4)
-def upsampler_response(factor: int = SUBSAMPLE, order: int = 3) -> np.ndarray:
-    """1-D response ``u1`` of the spline up-sampler to a unit pixel, indexed by the fine offset
-    from that pixel's central fine cell (odd length, centre = offset 0), normalised to sum 1."""
+UPSAMPLERS = ("spline", "box", "point")
+
+
+@functools.lru_cache(maxsize=8)
+def upsampler_response(factor: int = SUBSAMPLE, kind: str = "spline") -> np.ndarray:
+    """1-D response ``u1`` of the up-sampler to a unit pixel, indexed by the fine offset from that
+    pixel's central fine cell (odd length, centre = offset 0), normalised to sum 1.
+
+    ``"spline"`` (default): cubic-spline interpolation of the radiance (a continuous scene);
+    ``"box"``: each pixel a uniform square; ``"point"``: each pixel a point source at its centre
+    (star fields, beads; with this model a one-pixel scene reproduces ``view_psfs`` exactly).
+    """
+    if kind == "point":
+        return np.ones(1)
+    if kind == "box":
+        return np.ones(factor) / factor
+    if kind != "spline":
+        raise ValueError(f"upsample must be one of {UPSAMPLERS}, got {kind!r}")
     n = 41
     delta = np.zeros(n)
     delta[n // 2] = 1.0
-    fine = ndimage.zoom(delta, factor, order=order, grid_mode=True, mode="grid-constant")
+    fine = ndimage.zoom(delta, factor, order=3, grid_mode=True, mode="grid-constant")
     centre = factor * (n // 2) + factor // 2
     keep = np.abs(fine) > 1e-6 * np.abs(fine).max()
     half = int(np.max(np.abs(np.nonzero(keep)[0] - centre)))
@@ -44,16 +58,18 @@ def upsampler_response(factor: int = SUBSAMPLE, order: int = 3) -> np.ndarray:
     return u1 / u1.sum()
 
 
-def collapse(fine: np.ndarray, factor: int = SUBSAMPLE, integrate: bool = False) -> np.ndarray:
+def collapse(fine: np.ndarray, factor: int = SUBSAMPLE, integrate: bool = False,
+             upsample: str = "spline") -> np.ndarray:
     """Effective pixel-grid kernels from fine kernels ``(..., Kf, Kf)`` (Kf odd, centre = zero
     displacement, sampled at pitch/factor, value = response of one point per unit flux).
 
     ``integrate=False``: sampled at the central fine cell of each pixel (view samples);
     ``integrate=True``: summed over the factor×factor fine cells of each pixel (2D sensor).
+    ``upsample``: the scene model, see :func:`upsampler_response`.
     Returns ``(..., K, K)`` float32 with K odd, centre = zero displacement.
     """
     fine = np.asarray(fine, dtype=np.float64)
-    u1 = upsampler_response(factor)
+    u1 = upsampler_response(factor, upsample)
     if integrate:
         u1 = np.convolve(u1, np.ones(factor))
     lead = fine.shape[:-2]
@@ -94,7 +110,10 @@ def _psf_module():
 
 def fine_view_bank(cfg, zernike=None, depth: float = 0.0, phase=None, amplitude=None,
                    device=None) -> np.ndarray:
-    """``view_psfs(..., subsample=3)``: (nnum, nnum, Kf, Kf) float32, per point per unit flux."""
+    """``view_psfs(..., subsample=3)`` rescaled to photons per unit point flux:
+    (nnum, nnum, Kf, Kf) float32. (``view_psfs`` returns ``H_sub = per-point / subsample²``,
+    each fine point carrying 1/subsample² of a pixel's flux; :func:`collapse` distributes the
+    pixel's flux itself through the up-sampler ``u``, so the factor is put back here.)"""
     psf = _psf_module()
     kwargs = {"subsample": SUBSAMPLE, "device": device}
     if phase is not None:
@@ -103,16 +122,42 @@ def fine_view_bank(cfg, zernike=None, depth: float = 0.0, phase=None, amplitude=
     if amplitude is not None:
         kwargs["amplitude"] = amplitude
     bank = psf.view_psfs(cfg, zernike, float(depth), **kwargs)
-    return np.asarray(bank, dtype=np.float32)
+    return np.asarray(bank, dtype=np.float32) * np.float32(SUBSAMPLE**2)
+
+
+def _widefield_size(cfg, zernike, depth: float, phase, sampling: float,
+                    margin: float = 16.0) -> int:
+    """Odd window [samples] holding the geometric ray bundle ((λ/NA) max|∇W|) plus ``margin``
+    λ/NA of diffraction tails (the Airy pattern keeps ≈ 99.4 % of its energy within 16 λ/NA)."""
+    t = np.linspace(-1.0, 1.0, 129)
+    x, y = np.meshgrid(t, t)
+    inside = x * x + y * y <= 1.0
+    w = np.zeros_like(x)
+    if zernike is not None:
+        from metasensor.optics.zernike import wavefront
+
+        w = w + np.asarray(wavefront(np.asarray(zernike, float), x, y))
+    if phase is not None:
+        w = w + np.where(inside, np.asarray(phase(x, y), dtype=np.float64), 0.0)
+    if depth:
+        w = w + depth / cfg.wavelength * (np.sqrt(1 - cfg.na**2 * np.minimum(x * x + y * y, 1))
+                                          - 1)
+    gy, gx = np.gradient(w, t[1] - t[0])
+    inner = inside & (np.hypot(x, y) <= 1.0 - 2 * (t[1] - t[0]))
+    gmax = float(np.hypot(gx, gy)[inner].max()) if inner.any() else 0.0
+    lam_na = cfg.wavelength / cfg.na
+    return 2 * int(np.ceil((lam_na * (gmax + margin)) / sampling)) + 1
 
 
 def fine_widefield(cfg, zernike=None, depth: float = 0.0, phase=None, device=None) -> np.ndarray:
-    """``widefield_psf`` sampled at pixel_pitch/3 (fine-cell integrated, sums to ≈ 1)."""
+    """``widefield_psf`` sampled at pixel_pitch/3 (fine-cell integrated, sums to ≈ 1), on a window
+    sized by :func:`_widefield_size` (the ray bundle plus 16 λ/NA)."""
     psf = _psf_module()
-    kwargs = {"device": device}
+    sampling = cfg.pixel_pitch / SUBSAMPLE
+    kwargs = {"device": device, "size": _widefield_size(cfg, zernike, depth, phase, sampling)}
     if phase is not None:
         kwargs["phase"] = phase
-    out = psf.widefield_psf(cfg, zernike, float(depth), cfg.pixel_pitch / SUBSAMPLE, **kwargs)
+    out = psf.widefield_psf(cfg, zernike, float(depth), sampling, **kwargs)
     return np.asarray(out, dtype=np.float32)
 
 

@@ -63,8 +63,26 @@ def _tile_samples(stride: int, c: int, target: int) -> tuple[int, int]:
     return n, size
 
 
+def _plan(count: int, stride: int, c: int, tile: int) -> tuple[int, int]:
+    """Tiling of ``count`` samples along one axis: (samples per tile, FFT length), choosing the
+    number of tiles that minimises a cost model (products ∝ tiles · P; the kernels' own FFTs
+    ∝ P log P once per kernel), with P <= max(tile, the smallest single-tile size)."""
+    best = None
+    for k in range(1, count + 1):
+        n = -(-count // k)
+        size = fft_size(stride * (n - 1) + 2 * c + 1, stride)
+        if size > tile and k < count and best is not None:
+            continue
+        cost = k * size + 0.3 * size * max(size.bit_length(), 1) / 4
+        if best is None or cost < best[0]:
+            best = (cost, (size - 2 * c - 1) // stride + 1, size)
+        if size <= 2 * c + stride:
+            break
+    return best[1], best[2]
+
+
 def sampled_conv(image: torch.Tensor, kernels: torch.Tensor, rows: Lattice, cols: Lattice,
-                 out: torch.Tensor | None = None, *, tile: int = 512,
+                 out: torch.Tensor | None = None, *, tile: int = 768,
                  max_bytes: int = 256 * 2**20) -> torch.Tensor:
     """Linear convolution of ``image`` (H, W) with ``kernels`` (B, k, k), k odd, centre k//2 =
     zero displacement, evaluated at the lattice samples; zero outside the image.
@@ -86,8 +104,8 @@ def sampled_conv(image: torch.Tensor, kernels: torch.Tensor, rows: Lattice, cols
     if r1 <= r0 or c1 <= c0:
         return out
     sy, sx = rows.stride, cols.stride
-    ny_t, py = _tile_samples(sy, c, min(tile, sy * (r1 - r0 - 1) + 2 * c + 1))
-    nx_t, px = _tile_samples(sx, c, min(tile, sx * (c1 - c0 - 1) + 2 * c + 1))
+    ny_t, py = _plan(r1 - r0, sy, c, tile)
+    nx_t, px = _plan(c1 - c0, sx, c, tile)
     h, w = image.shape
     # tile windows (zero padded): window of a tile starting at sample i covers input rows
     # [offset + s*i - c, offset + s*i - c + P)
@@ -114,8 +132,8 @@ def sampled_conv(image: torch.Tensor, kernels: torch.Tensor, rows: Lattice, cols
         kb = kernels[b0:b0 + chunk].to(device=dev, dtype=dt)
         # kernel element e placed at index (e - 2c) mod P: out_circ[m] = conv at window + m + c
         kpad = torch.zeros((kb.shape[0], py, px), device=dev, dtype=dt)
-        kpad[:, :k, :k] = kb
-        kpad = torch.roll(kpad, shifts=(-2 * c, -2 * c), dims=(1, 2))
+        iy = torch.arange(k, device=dev) - 2 * c
+        kpad[:, (iy % py)[:, None], (iy % px)[None, :]] = kb
         spec_k = torch.fft.rfft2(kpad)[:, None, None]  # (B, 1, 1, py, px//2+1)
         del kpad
         m = py // sy

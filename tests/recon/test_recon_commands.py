@@ -7,7 +7,7 @@ import h5py
 import numpy as np
 import pytest
 import tifffile
-from recon_standin import gaussian_psfs, synth_views
+from recon_standin import gaussian_psfs, one_torch_thread, synth_views  # noqa: F401
 from typer.testing import CliRunner
 
 from metasensor.cli import app
@@ -37,7 +37,7 @@ def test_reconstruct_cli_writes_image_and_figure(files):
     out = files / "out"
     res = CliRunner().invoke(app, ["reconstruct", str(files / "views.tif"), "--psf",
                                    str(files / "psf.h5"), "--blocks", "2x2", "--overlap", "6",
-                                   "--iterations", "2", "--out", str(out)])
+                                   "--iterations", "2", "--zarr", "--out", str(out)])
     assert res.exit_code == 0, res.output
     img = tifffile.imread(out / "image.tif")
     assert img.shape == (50, 50) and img.dtype == np.float32 and np.isfinite(img).all()
@@ -45,6 +45,9 @@ def test_reconstruct_cli_writes_image_and_figure(files):
     summary = json.loads((out / "summary.json").read_text())
     assert summary["blocks"] == [2, 2] and len(summary["history"][0][0]) == 2
     assert np.load(out / "zernike.npy").shape == (2, 2, 45)
+    import zarr
+
+    np.testing.assert_array_equal(np.asarray(zarr.open_array(str(out / "image.zarr"))[:]), img)
     assert hashlib.sha256((files / "views.tif").read_bytes()).hexdigest() == before
 
 

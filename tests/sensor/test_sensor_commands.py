@@ -83,6 +83,13 @@ def test_calibrate_then_realign(capture):
     est = views * fv
     psnr = 10 * np.log10(truth.max() ** 2 / np.mean((est[bright] - truth[bright]) ** 2))
     assert psnr >= 40, psnr
+    res = run("realign", root / "raw.tif", "--calib", root / "calib.toml", "--scan", 3,
+              "--order", "serpentine", "--out", root / "views16.tif", "--dtype", "input")
+    assert res.exit_code == 0, res.output
+    v16 = read_views(root / "views16.tif")
+    assert v16.dtype == np.uint16
+    lit = fv > 0.05  # where --flat divided (elsewhere it wrote 0)
+    assert np.abs(v16 - read_views(root / "views.tif") * fv)[lit].max() <= 0.51
     assert all(digest(root / p) == s for p, s in sums.items())
 
 
@@ -130,12 +137,19 @@ def test_realign_bad_inputs(capture, tmp_path):
 
 def test_calibrate_multipage_measures_offsets(capture, tmp_path):
     res = run("calibrate", capture["root"] / "raw.tif", "--scan", 3, "--order", "serpentine",
-              "--out", tmp_path / "c.toml", "--no-flat")
+              "--out", tmp_path / "c.toml", "--no-flat", "--figure", tmp_path / "c.png")
     assert res.exit_code == 0, res.output
     calib = Calibration.from_toml(tmp_path / "c.toml")
     assert calib.offsets is not None and calib.flat is None
     assert np.abs(calib.offset_errors()).max() < 0.35
-    assert "measured - nominal" in res.output or "offsets" in res.output
+    assert "measured - nominal" in res.output
+    assert (tmp_path / "c.png").stat().st_size > 1000
+    # the measured offsets are used by realign (--offsets calib) and written as Zarr
+    res = run("realign", capture["root"] / "raw.tif", "--calib", tmp_path / "c.toml", "--scan",
+              3, "--order", "serpentine", "--offsets", "calib", "--out", tmp_path / "v.zarr")
+    assert res.exit_code == 0, res.output
+    views = read_views(tmp_path / "v.zarr")
+    assert views.shape == (N, N, calib.lenslets[0] * 3, calib.lenslets[1] * 3)
 
 
 def test_nan_frames_rejected(tmp_path):

@@ -1,0 +1,91 @@
+"""One wave-DAO iteration on a block: seconds, and the ratio to the FFTs it needs (same run).
+
+One iteration = Krishnan–Fergus deconvolution of every used view (113 for the prototype) on the
+pixel grid, their signal-weighted mean, the forward prediction of every view and the sub-pixel
+shift measurement (:class:`metasensor.recon.dao._Block`). PSF regeneration (``view_psfs``, the
+optics stage, once per three iterations) is timed separately. The FFT reference times the
+real FFTs of the same sizes and counts on the same device: per view 6 β steps × (2 forward +
+1 inverse) + 1 for the data, 1 inverse for the prediction, and the correlation's complex FFTs.
+Full mode: a 2,000 × 2,000-pixel block (the issue's figure); quick: 300 × 300.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE.parent / "src"))
+
+
+def _fft_reference(n_views: int, grid: tuple[int, int], view: tuple[int, int], betas: int,
+                   device) -> float:
+    import torch
+
+    x = torch.randn((min(n_views, 16), *grid), device=device)
+    v = torch.randn((min(n_views, 16), *view), device=device)
+    reps = int(np.ceil(n_views / x.shape[0]))
+    t0 = time.perf_counter()
+    for _ in range(reps):
+        for _ in range(betas):
+            s = torch.fft.rfft2(x)
+            s2 = torch.fft.rfft2(x)
+            x = torch.fft.irfft2(s + s2, s=grid)
+        torch.fft.rfft2(x)  # data spectrum
+        torch.fft.irfft2(torch.fft.rfft2(x), s=grid)  # prediction
+        for _ in range(3):  # correlation: two forward, one inverse complex FFT
+            torch.fft.fft2(v)
+    if device.type == "cuda":
+        torch.cuda.synchronize()
+    return time.perf_counter() - t0
+
+
+def run(quick: bool = False) -> list[dict]:
+    import torch
+
+    import metasensor as ms
+    from metasensor.backend import resolve_device
+    from metasensor.recon.dao import _Block
+    from metasensor.recon.fastdeconv import beta_schedule
+
+    cfg = ms.SystemConfig()
+    dev = resolve_device(None)
+    size = 300 if quick else 2000
+    d = cfg.scan_step_px
+    h = size // d
+    used = cfg.view_mask()
+    rng = np.random.default_rng(0)
+    from scipy.ndimage import gaussian_filter
+
+    t0 = time.perf_counter()
+    bank = ms.view_psfs(cfg)
+    t_psf = time.perf_counter() - t0
+    views = np.stack([gaussian_filter(rng.random((h, h)), 2).astype(np.float32)
+                      for _ in range(int(used.sum()))])
+    tv = torch.as_tensor(views, device=dev)
+    blk = _Block(tv, cfg, used, 5e4, 16)
+    t0 = time.perf_counter()
+    blk.set_psfs(bank)
+    shifts = torch.zeros((tv.shape[0], 2), device=dev)
+    image = blk.estimate(shifts)
+    t_est = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    blk.measure(image, 50.0)
+    if dev.type == "cuda":
+        torch.cuda.synchronize()
+    t_meas = time.perf_counter() - t0
+    total = t_est + t_meas
+    t_fft = _fft_reference(tv.shape[0], blk.shape, (h, h), len(beta_schedule()), dev)
+    return [{"block_px": size, "views": int(used.sum()), "device": dev.type,
+             "psf_kernel": int(blk.kernels.shape[-1]), "fft_grid": list(blk.shape),
+             "deconv_mean_s": t_est, "shift_measure_s": t_meas, "iteration_s": total,
+             "fft_s": t_fft, "ratio_to_fft": total / t_fft, "view_psfs_s": t_psf,
+             "threads": torch.get_num_threads()}]
+
+
+if __name__ == "__main__":
+    for row in run("--quick" in sys.argv):
+        print(row)

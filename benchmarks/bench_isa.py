@@ -1,0 +1,241 @@
+"""ISA (phase-space Richardson–Lucy) speed: wall time vs the time of the FFTs it needs.
+
+Full mode (the issue): 2,010 x 2,010-pixel output (134 x 134 lenslets, nnum 15, 5x5 scan, d = 3),
+113 views, 5 iterations, one block. Two FFT references, timed in the same run at the same sizes
+on the same device:
+- ``fft_own_s``: exactly the FFT calls our iteration makes (per subset one full rfft2 + irfft2; per
+  view the small transforms of the folded spectra: an inverse FFT along y of (My, Nx/2+1), an
+  inverse real FFT along x of (My, Nx), and a small FFT2 (My, Mx));
+- ``fft_conventional_s``: what a per-view full-size FFT convolution needs (the authors' way, on
+  views up-sampled to the image grid): per view one inverse and one forward full-size real FFT per
+  iteration (+ the per-subset pair).
+Ratios ``wall / fft``. Variants: the default ordered subsets (16) at full size; simultaneous (1),
+16 and sequential (113 subsets) at the quick size (300 px; the sequential variant's 113 per-view
+normalisers would take 1.9 GB at full size).
+
+Quality per iteration (rows with ``ssim_per_iter``): simulated 180 x 180 px chart and camera at
+SNR 30 dB (simulate + view_psfs), SSIM to the truth after each iteration for the simultaneous
+(1), ordered-subset (4, 16) and sequential (113) variants, with the seconds per iteration.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE.parent / "src"))
+
+
+def psf_bank(cfg):
+    """The library's PSF bank, or (before the optics stage lands) the tests' stand-in model."""
+    try:
+        from metasensor.optics.psf import view_psfs
+
+        return np.asarray(view_psfs(cfg), np.float32), "view_psfs"
+    except ImportError:
+        sys.path.insert(0, str(HERE.parent / "tests" / "recon"))
+        from recon_standin import standin_psfs
+
+        return standin_psfs(nnum=cfg.nnum), "standin"
+
+
+def _problem(lenslets: int, device):
+    from metasensor.config import SystemConfig
+    from metasensor.recon.forward import PhaseSpaceOperator, make_geometry
+    from metasensor.recon.isa import view_order
+
+    cfg = SystemConfig()
+    bank, source = psf_bank(cfg)
+    uv = view_order(cfg.view_mask(), "spiral")
+    psf = np.stack([bank[u, v] for u, v in uv])
+    d = cfg.scan_step_px
+    s = lenslets * cfg.scan
+    geom = make_geometry((s, s), d, psf.shape[-1] // 2)
+    t0 = time.perf_counter()
+    op = PhaseSpaceOperator(psf, geom, device=device)
+    otf_s = time.perf_counter() - t0
+    rng = np.random.default_rng(0)
+    from scipy.ndimage import gaussian_filter
+
+    img = gaussian_filter(rng.random(geom.domain).astype(np.float32), 2.0) + 0.1
+    data = op.forward(torch.from_numpy(img).to(op.device))
+    mask = torch.zeros(geom.grid, dtype=torch.bool, device=op.device)
+    sy, sx = geom.sample_slices()
+    mask[sy, sx] = True
+    data = data * mask
+    return op, data, mask, otf_s, source
+
+
+def _sync(device):
+    if torch.device(device).type == "cuda":
+        torch.cuda.synchronize()
+
+
+def _fft_times(op, n_subsets: int, iterations: int) -> tuple[float, float]:
+    """Seconds of (our FFT calls, a conventional per-view full-size FFT convolution's calls) for
+    ``iterations`` iterations (one iteration timed, times ``iterations``: every iteration makes
+    the same calls)."""
+    dev = op.device
+    ny, nx = op.geometry.domain
+    my, mx = op.geometry.grid
+    nh = nx // 2 + 1
+    img = torch.rand((ny, nx), device=dev)
+    spec = torch.fft.rfft2(img)
+    ch = op.chunk
+    half = torch.rand((ch, my, nh), device=dev, dtype=torch.complex64)
+    small = torch.rand((ch, my, mx), device=dev)
+    nv = op.n_views
+    _sync(dev)
+    t0 = time.perf_counter()
+    for _ in range(1):
+        for _ in range(n_subsets):
+            torch.fft.rfft2(img)
+            torch.fft.irfft2(spec, s=(ny, nx))
+        for start in range(0, nv, ch):
+            c = min(ch, nv - start)
+            rows = torch.fft.ifft(half[:c], dim=-2)
+            torch.fft.irfft(rows, n=nx, dim=-1)
+            torch.fft.fft2(small[:c])
+    _sync(dev)
+    own = (time.perf_counter() - t0) * iterations
+    t0 = time.perf_counter()
+    for _ in range(1):
+        for _ in range(n_subsets):
+            torch.fft.rfft2(img)
+            torch.fft.irfft2(spec, s=(ny, nx))
+        for _ in range(nv):
+            torch.fft.irfft2(spec, s=(ny, nx))
+            torch.fft.rfft2(img)
+    _sync(dev)
+    conventional = (time.perf_counter() - t0) * iterations
+    return own, conventional
+
+
+def _speed_rows(lenslets: int, iterations: int, variants, device) -> list[dict]:
+    from metasensor.recon.isa import richardson_lucy
+
+    op, data, mask, otf_s, source = _problem(lenslets, device)
+    rows = []
+    for subsets in variants:
+        _sync(op.device)
+        t0 = time.perf_counter()
+        richardson_lucy(op, data, mask, iterations=iterations, subsets=subsets)
+        _sync(op.device)
+        wall = time.perf_counter() - t0
+        own, conv = _fft_times(op, subsets, iterations)
+        rows.append({"output_px": lenslets * 15, "views": op.n_views, "subsets": subsets,
+                     "iterations": iterations, "domain": op.geometry.domain[0], "psf": source,
+                     "device": str(op.device), "otf_setup_s": otf_s, "wall_s": wall,
+                     "s_per_iter": wall / max(iterations, 1), "fft_own_s": own,
+                     "ratio_own": wall / own, "fft_conventional_s": conv,
+                     "ratio_conventional": wall / conv})
+    return rows
+
+
+def _quality_rows(iterations: int) -> list[dict]:
+    import importlib.util
+
+    from skimage.metrics import structural_similarity
+
+    import metasensor as ms
+    from metasensor.recon.forward import PhaseSpaceOperator, make_geometry
+    from metasensor.recon.isa import richardson_lucy, subset_major, view_order
+    from metasensor.simulate.capture import simulate
+    from metasensor.simulate.scenes import natural_image, resolution_chart
+
+    spec = importlib.util.spec_from_file_location("bsp", HERE / "bench_scan_period.py")
+    bsp = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bsp)
+    cfg = ms.SystemConfig()
+    bank = np.asarray(ms.view_psfs(cfg), np.float32)
+    size = 12 * 15 + 12
+    rows = []
+    scenes = (("chart", resolution_chart(size)), ("camera", natural_image("camera", size)))
+    for name, scene in scenes:
+        cap = simulate(scene, cfg, snr_db=30.0, seed=0, comparison=False)
+        truth = cap.truth * np.float32(bsp.truth_scale(cap, bank))
+        dr = float(truth.max() - truth.min())
+        s = cap.views.shape[-1]
+        for subsets in (1, 4, 16, 113):
+            uv = subset_major(view_order(cfg.view_mask(), "spiral"), subsets)
+            g = make_geometry((s, s), cfg.scan_step_px, bank.shape[-1] // 2)
+            op = PhaseSpaceOperator(np.stack([bank[u, v] for u, v in uv]), g)
+            data = torch.zeros((len(uv), *g.grid), device=op.device)
+            mask = torch.zeros(g.grid, dtype=torch.bool, device=op.device)
+            sy, sx = g.sample_slices()
+            data[:, sy, sx] = torch.from_numpy(np.stack([cap.views[u, v] for u, v in uv]))
+            mask[sy, sx] = True
+            curve = []
+            t0 = time.perf_counter()
+            est = None
+            elapsed = 0.0
+            for _ in range(iterations):
+                t1 = time.perf_counter()
+                est = richardson_lucy(op, data, mask, iterations=1, subsets=subsets,
+                                      init=est).estimate
+                elapsed += time.perf_counter() - t1
+                img = g.crop(est).cpu().numpy()
+                curve.append(round(float(structural_similarity(truth, img, data_range=dr)), 4))
+            rows.append({"scene": name, "subsets": subsets, "iterations": iterations,
+                         "s_per_iter": elapsed / iterations, "ssim_per_iter": curve,
+                         "best_ssim": max(curve), "best_at": int(np.argmax(curve)) + 1,
+                         "wall_s": time.perf_counter() - t0})
+    return rows
+
+
+def _edge_rows() -> list[dict]:
+    """Edges: the padded estimate domain (linear convolution, unobserved margins estimated) vs
+    the unpadded, circular one; PSNR/SSIM in the outer 15-px band of the field and inside it."""
+    import importlib.util
+
+    from skimage.metrics import structural_similarity
+
+    import metasensor as ms
+    from metasensor.recon.api import reconstruct
+    from metasensor.simulate.capture import simulate
+    from metasensor.simulate.scenes import natural_image
+
+    spec = importlib.util.spec_from_file_location("bsp", HERE / "bench_scan_period.py")
+    bsp = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bsp)
+    cfg = ms.SystemConfig()
+    bank = np.asarray(ms.view_psfs(cfg), np.float32)
+    cap = simulate(natural_image("camera", 12 * 15 + 12), cfg, snr_db=30.0, seed=0,
+                   comparison=False)
+    truth = cap.truth * np.float32(bsp.truth_scale(cap, bank))
+    dr = float(truth.max() - truth.min())
+    band = np.ones(truth.shape, bool)
+    band[15:-15, 15:-15] = False
+    rows = []
+    for pad in (True, False):
+        img = reconstruct(cap.views, cfg, psf=bank, pad=pad).image
+        _, smap = structural_similarity(truth, img, data_range=dr, full=True)
+        err = (img.astype(np.float64) - truth) ** 2
+        rows.append({"edges": "padded" if pad else "circular",
+                     "psnr_band_db": float(10 * np.log10(dr**2 / err[band].mean())),
+                     "psnr_inner_db": float(10 * np.log10(dr**2 / err[~band].mean())),
+                     "ssim_band": float(smap[band].mean()),
+                     "ssim_inner": float(smap[~band].mean())})
+    return rows
+
+
+def run(quick: bool = False) -> list[dict]:
+    from metasensor.backend import resolve_device
+
+    device = str(resolve_device(None))
+    rows = _speed_rows(20, 2, (1, 16, 113), device)
+    if not quick:
+        rows += _speed_rows(134, 5, (16,), device)
+        rows += _quality_rows(10)
+        rows += _edge_rows()
+    return rows
+
+
+if __name__ == "__main__":
+    for row in run(quick="--quick" in sys.argv):
+        print(row)

@@ -1,0 +1,119 @@
+"""PSF banks on disk (HDF5) and their figure, and the ``--zernike`` text format.
+
+File layout (h5py): dataset ``"psf"`` float32 ``[u, v, y, x]``; attributes ``config`` (the
+SystemConfig as JSON), ``zernike`` (Noll vector, waves), ``depth`` [m], ``subsample``,
+``pixel_pitch`` [m] (sampling of the last two axes = pixel_pitch / subsample), ``axes``.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from metasensor.config import SystemConfig
+from metasensor.io.atomic import atomic_path
+
+__all__ = ["save_psf", "load_psf", "plot_views", "parse_zernike"]
+
+
+def parse_zernike(text: str | None) -> np.ndarray | None:
+    """``"4:0.5,7:-0.2"`` -> Noll vector (waves) with z[3] = 0.5, z[6] = -0.2; "" -> None."""
+    if text is None or not text.strip():
+        return None
+    coeffs: dict[int, float] = {}
+    for item in text.split(","):
+        item = item.strip()
+        if not item:
+            continue
+        try:
+            j_text, c_text = item.split(":")
+            j, c = int(j_text), float(c_text)
+        except ValueError:
+            raise ValueError(
+                f"--zernike must look like '4:0.5,7:-0.2' (Noll index:waves), got {text!r}"
+            ) from None
+        if j < 1:
+            raise ValueError(f"--zernike: Noll index must be >= 1, got {j}")
+        if not np.isfinite(c):
+            raise ValueError(f"--zernike: coefficient of mode {j} is not finite")
+        coeffs[j] = c
+    if not coeffs:
+        return None
+    z = np.zeros(max(coeffs))
+    for j, c in coeffs.items():
+        z[j - 1] = c
+    return z
+
+
+def save_psf(path: str | Path, psf: np.ndarray, cfg: SystemConfig, zernike=None,
+             depth: float = 0.0, subsample: int = 1) -> Path:
+    """Write a bank ``(nnum, nnum, K, K)`` to HDF5 atomically; returns the path."""
+    import h5py
+
+    psf = np.asarray(psf, dtype=np.float32)
+    if psf.ndim != 4 or psf.shape[:2] != (cfg.nnum, cfg.nnum):
+        raise ValueError(f"psf must have shape (nnum, nnum, K, K), got {psf.shape}")
+    path = Path(path)
+    with atomic_path(path) as tmp:
+        with h5py.File(tmp, "w") as f:
+            f.create_dataset("psf", data=psf, compression="gzip", compression_opts=4)
+            f.attrs["config"] = cfg.to_json()
+            f.attrs["zernike"] = np.zeros(0) if zernike is None else np.asarray(zernike, float)
+            f.attrs["depth"] = float(depth)
+            f.attrs["subsample"] = int(subsample)
+            f.attrs["pixel_pitch"] = cfg.pixel_pitch
+            f.attrs["axes"] = "u,v,y,x"
+    return path
+
+
+def load_psf(path: str | Path) -> tuple[np.ndarray, SystemConfig]:
+    """Read a bank written by :func:`save_psf` -> (psf float32 [u, v, y, x], config)."""
+    import h5py
+
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"PSF file not found: {path}")
+    try:
+        with h5py.File(path, "r") as f:
+            if "psf" not in f:
+                raise ValueError(f"{path}: no dataset 'psf' (not a metasensor PSF file)")
+            psf = np.asarray(f["psf"], dtype=np.float32)
+            cfg = SystemConfig.from_json(str(f.attrs["config"]))
+    except OSError as exc:
+        raise ValueError(f"{path}: not a readable HDF5 file ({exc})") from None
+    except (KeyError, json.JSONDecodeError) as exc:
+        raise ValueError(f"{path}: missing or corrupt config attribute ({exc})") from None
+    if psf.shape[:2] != (cfg.nnum, cfg.nnum):
+        raise ValueError(f"{path}: psf shape {psf.shape} does not match nnum {cfg.nnum}")
+    return psf, cfg
+
+
+def plot_views(psf: np.ndarray, cfg: SystemConfig, path: str | Path, title: str = "",
+               subsample: int = 1) -> Path:
+    """PNG of a 3 x 3 selection of views (centre, and ±r views along u and v, r = 0.6 of the
+    pupil radius), each on its own linear scale; written atomically."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    c = cfg.center
+    r = max(1, min(c, int(round(0.6 * cfg.pupil_radius_px))))
+    fig, axes = plt.subplots(3, 3, figsize=(8, 8), constrained_layout=True)
+    k = psf.shape[-1]
+    ext = k * cfg.pixel_pitch / subsample * 1e6 / 2  # half width in µm
+    for i, du in enumerate((-r, 0, r)):
+        for j, dv in enumerate((-r, 0, r)):
+            u, v = c + du, c + dv
+            ax = axes[i, j]
+            ax.imshow(psf[u, v], cmap="magma", extent=(-ext, ext, ext, -ext))
+            ax.set_title(f"view ({u}, {v})  sum {psf[u, v].sum():.3f}", fontsize=9)
+            ax.tick_params(labelsize=7)
+    fig.suptitle(title or f"phase-space PSFs [u, v]; axes in µm at the MLA (K = {k})")
+    path = Path(path)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=110, format="png")
+    plt.close(fig)
+    return path

@@ -1,0 +1,294 @@
+"""Digital adaptive optics in one block: wave-optics (and geometric) wavefront estimation.
+
+Hand-written from the paper (Methods, "ISA with multisite DAO in wave optics"; system.md §4).
+Alternate, starting from φ = ``init`` (or 0):
+
+1. H = PSFs of every view from the pupil A·exp(i2πφ) (``view_psfs(cfg, zernike=φ,
+   amplitude=A)``; "geometric" mode: the aberration-free PSFs translated by the accumulated view
+   shifts, never reshaped);
+2. I = Σ_uv Deconv(V_uv translated by −s_uv, H_uv) / Σ_uv e_uv — Krishnan–Fergus deconvolution
+   (α = 2/3, λ = 5e4) of every view, up-sampled from its scan-step grid to the pixel grid;
+   e_uv = Σ H_uv (the views' light, so the mean is weighted by signal);
+3. s_uv = shift of V_uv against the prediction S_d(I ⊛ H_uv) (sub-sample cross-correlation),
+   in image pixels, clipped to ±50 px (the authors' limit);
+4. every ``inner`` (3) iterations, fit the shifts by Zernike modes 4–45 plus a common offset
+   (:mod:`metasensor.recon.wavefront`), add the fit to φ, regenerate the PSFs and restart the
+   shifts from 0. Stop when the r.m.s. of the update is below ``tol`` (0.1 λ) or after
+   ``max_iter`` updates.
+
+``history`` holds the r.m.s. (waves, modes 4–45) of every update. Views used: ``cfg.view_mask()``
+(113 for the prototype) and, when a pupil amplitude is given, its lit views. The mean in step 2
+needs no visiting order (the authors' spiral order matters for their sequential RL updates,
+not for this average).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+import torch
+
+from metasensor.backend import as_tensor, resolve_device, to_numpy
+from metasensor.config import SystemConfig
+from metasensor.recon.fastdeconv import DEFAULT_LAMBDA, beta_schedule, kf_deconv, pad_fade, psf2otf
+from metasensor.recon.shifts import fourier_shift, measure_shifts_torch
+from metasensor.recon.wavefront import (
+    DAO_MODES,
+    fit_shifts,
+    gradient_matrix,
+    zernike_rms,
+)
+from metasensor.recon.wavefront import predicted_shifts as _predicted
+
+__all__ = ["estimate_block_aberration", "DaoResult", "run_dao", "geometric_psfs", "block_psfs"]
+
+JMAX = 45
+
+
+@dataclass
+class DaoResult:
+    """Everything one DAO run produced. zernike (45,) waves; history: r.m.s. of each update;
+    shifts (nnum, nnum, 2): for "geometric", the accumulated absolute view shifts (pixels) the
+    PSFs were translated by, for "wave" the last residual shifts; image: the last intermediate
+    estimate I (pixel grid); fits: residual r.m.s. (px) of every shift fit."""
+
+    zernike: np.ndarray
+    history: list[float]
+    shifts: np.ndarray
+    method: str
+    image: np.ndarray | None = None
+    fits: list[float] = field(default_factory=list)
+
+
+# ----------------------------------------------------------------------------- PSF banks
+def _psf_bank(cfg: SystemConfig, zernike, amplitude, device, psf_kw) -> np.ndarray:
+    from metasensor.optics.psf import view_psfs
+
+    kw = dict(psf_kw or {})
+    if amplitude is not None:
+        kw["amplitude"] = amplitude
+    return view_psfs(cfg, zernike=zernike, device=device, **kw)
+
+
+def geometric_psfs(ideal: np.ndarray, shifts: np.ndarray) -> np.ndarray:
+    """Aberration-free PSFs ``(n, n, K, K)`` translated by ``shifts (n, n, 2)`` pixels (y, x)
+    (Fourier shift, after padding K to hold the largest shift) → ``(n, n, K', K')``, K' odd."""
+    h = np.asarray(ideal, dtype=np.float32)
+    s = np.asarray(shifts, dtype=np.float64)
+    n, _, k, _ = h.shape
+    if s.shape != (n, n, 2):
+        raise ValueError(f"shifts must have shape ({n}, {n}, 2), got {s.shape}")
+    pad = int(math.ceil(np.abs(s).max())) + 2 if s.size else 0
+    t = torch.as_tensor(np.pad(h, ((0, 0), (0, 0), (pad, pad), (pad, pad))))
+    out = fourier_shift(t.reshape(n * n, k + 2 * pad, k + 2 * pad),
+                        torch.as_tensor(s.reshape(n * n, 2), dtype=torch.float32))
+    out = out.clamp(min=0).reshape(n, n, k + 2 * pad, k + 2 * pad)
+    # keep the light: renormalise every view to its original energy
+    e0 = h.sum(axis=(2, 3))
+    e1 = to_numpy(out.sum(dim=(2, 3)))
+    scale = np.where(e1 > 0, e0 / np.maximum(e1, 1e-30), 0.0)
+    return (to_numpy(out) * scale[:, :, None, None]).astype(np.float32)
+
+
+def block_psfs(cfg: SystemConfig, result: DaoResult, amplitude=None, device=None,
+               **psf_kw) -> np.ndarray:
+    """The PSF bank to reconstruct a block with after DAO: wave → ``view_psfs`` of the estimate;
+    geometric → the ideal bank translated by the estimated view shifts (never reshaped)."""
+    if result.method == "geometric":
+        return geometric_psfs(_psf_bank(cfg, None, amplitude, device, psf_kw), result.shifts)
+    return _psf_bank(cfg, result.zernike, amplitude, device, psf_kw)
+
+
+# ----------------------------------------------------------------------------- the steps
+def _crop_slice(h: np.ndarray, keep: float = 0.998) -> slice:
+    """Centred rows of a bank ``(B, K, K)`` holding ``keep`` of the used views' light (the bank's
+    window is sized for all views, the dark outer ones included)."""
+    k = h.shape[-2]
+    prof = np.abs(h).sum(axis=(0, 2))
+    total = prof.sum()
+    c = k // 2
+    for r in range(c + 1):
+        if prof[c - r:c + r + 1].sum() >= keep * total:
+            return slice(c - r, c + r + 1)
+    return slice(0, k)
+
+
+def _upsample(views: torch.Tensor, d: int) -> torch.Tensor:
+    """Views (B, h, w) on the scan-step grid → (B, h·d, w·d) pixel grid (bicubic; sample Y sits
+    at pixel Y·d + d//2, the align_corners=False convention for odd d)."""
+    if d == 1:
+        return views
+    return torch.nn.functional.interpolate(views[:, None], scale_factor=d, mode="bicubic",
+                                           align_corners=False)[:, 0]
+
+
+class _Block:
+    """Geometry and data of one block: up-sampled views, their FFT padding, the PSF spectra."""
+
+    def __init__(self, views: torch.Tensor, cfg: SystemConfig, used: np.ndarray, lam: float,
+                 chunk: int):
+        self.cfg = cfg
+        self.d = cfg.scan_step_px
+        self.used = used
+        self.views = views  # (B, h, w) scan-step grid, used views only
+        self.scale = float(views.abs().max().clamp(min=1e-30))
+        self.up = _upsample(views / self.scale, self.d)  # (B, H, W)
+        self.lam = lam
+        self.chunk = chunk
+        self.betas = beta_schedule()
+
+    def set_psfs(self, bank: np.ndarray) -> None:
+        n = self.cfg.nnum
+        h = bank.reshape(n * n, *bank.shape[-2:])[self.used.ravel()]
+        h = as_tensor(h[:, _crop_slice(h)][:, :, _crop_slice(h.transpose(0, 2, 1))],
+                      self.views.device)
+        self.energy = h.sum(dim=(-2, -1)).clamp(min=1e-12)
+        self.kernels = h / self.energy[:, None, None]
+        k = h.shape[-1]
+        self.pad = k // 2 + 4
+        hh, ww = self.up.shape[-2:]
+        self.shape = (hh + 2 * self.pad, ww + 2 * self.pad)
+        self.otf = psf2otf(self.kernels, self.shape)
+
+    def estimate(self, shifts_px: torch.Tensor) -> torch.Tensor:
+        """I = Σ_uv e_uv Deconv(V_uv(p + s_uv), Ĥ_uv) / Σ e_uv on the pixel grid (H, W)."""
+        p = self.pad
+        hh, ww = self.up.shape[-2:]
+        acc = torch.zeros((hh, ww), device=self.up.device, dtype=self.up.dtype)
+        for a in range(0, self.up.shape[0], self.chunk):
+            b = slice(a, a + self.chunk)
+            y = pad_fade(self.up[b], p)
+            if shifts_px is not None:
+                y = fourier_shift(y, -shifts_px[b])
+            x = kf_deconv(y, self.otf[b], lam=self.lam, betas=self.betas)[:, p:p + hh, p:p + ww]
+            acc += (x * self.energy[b, None, None]).sum(0)
+        # each deconvolved view estimates I (kernels have unit sum, views carry e_uv·I)
+        return (acc / self.energy.sum()).clamp(min=0)
+
+    def predict(self, image: torch.Tensor) -> torch.Tensor:
+        """S_d(I ⊛ H_uv) for every used view → (B, h, w) (scan-step grid, view scale)."""
+        p, d = self.pad, self.d
+        hh, ww = image.shape
+        spec = torch.fft.rfft2(pad_fade(image[None], p))
+        out = []
+        for a in range(0, self.otf.shape[0], self.chunk):
+            b = slice(a, a + self.chunk)
+            conv = torch.fft.irfft2(spec * self.otf[b], s=self.shape)[:, p:p + hh, p:p + ww]
+            out.append(conv[:, d // 2::d, d // 2::d] * self.energy[b, None, None])
+        return torch.cat(out)
+
+    def measure(self, image: torch.Tensor, max_shift_px: float) -> torch.Tensor:
+        """Shifts (B, 2) in pixels of the measured views against the prediction."""
+        pred = self.predict(image)
+        s = measure_shifts_torch(pred, self.views / self.scale,
+                                 max_shift=max_shift_px / self.d)
+        return s * self.d
+
+
+# ----------------------------------------------------------------------------- the loop
+def gradient_shifts(phi: np.ndarray, matrix) -> np.ndarray:
+    """Modelled view shifts (pixels) of the modes 4–45 of a Noll vector."""
+    z = np.array(phi, dtype=np.float64)
+    z[:3] = 0.0
+    return _predicted(z, None, matrix=matrix)
+
+
+def run_dao(block_views, cfg: SystemConfig, method: str = "wave", init=None, device=None, *,
+            amplitude=None, max_iter: int = 5, inner: int = 3, tol: float = 0.1,
+            lam: float = DEFAULT_LAMBDA, max_shift_px: float = 50.0, modes=DAO_MODES,
+            view_mask=None, chunk: int = 16, psf_kw: dict | None = None,
+            progress: bool = False) -> DaoResult:
+    """Wavefront estimation in one block (module docstring); returns a :class:`DaoResult`.
+
+    block_views : (nnum, nnum, h, w) the block's views (scan-step grid, any intensity scale).
+    method : "wave" (PSFs regenerated from the estimated pupil) or "geometric" (ideal PSFs
+        translated by the measured shifts).
+    init : initial Noll vector (waves), e.g. the local system aberration; None = 0.
+    amplitude : (nnum, nnum) pupil amplitude (:mod:`metasensor.recon.pupil_estimate`) or None.
+    psf_kw : extra keyword arguments for ``view_psfs`` (e.g. ``{"cache": False}``).
+    """
+    if method not in ("wave", "geometric"):
+        raise ValueError(f"method must be 'wave' or 'geometric', got {method!r}")
+    n = cfg.nnum
+    v = np.asarray(block_views)
+    if v.ndim != 4 or v.shape[:2] != (n, n):
+        raise ValueError(f"block_views must have shape ({n}, {n}, h, w), got {v.shape}")
+    if min(v.shape[2:]) < 8:
+        raise ValueError(f"block too small for DAO: views of {v.shape[2:]} samples")
+    if not np.isfinite(v).all():
+        raise ValueError("block_views contain NaN or infinite values")
+    if max_iter < 1 or inner < 1:
+        raise ValueError(f"max_iter and inner must be >= 1, got {max_iter}, {inner}")
+    phi = np.zeros(JMAX)
+    if init is not None:
+        z0 = np.asarray(init, dtype=np.float64).ravel()
+        if not np.isfinite(z0).all():
+            raise ValueError("init contains NaN or infinite values")
+        phi[: min(z0.size, JMAX)] = z0[:JMAX]
+    used = cfg.view_mask() if view_mask is None else np.asarray(view_mask, dtype=bool)
+    if amplitude is not None:
+        amp = np.asarray(amplitude, dtype=np.float64)
+        if amp.shape != (n, n):
+            raise ValueError(f"amplitude must have shape ({n}, {n}), got {amp.shape}")
+        used = used & (amp > 0)
+    matrix = gradient_matrix(cfg, jmax=JMAX)
+    used = used & (matrix[1] >= 0.5)
+    if used.sum() < 8:
+        raise ValueError(f"only {int(used.sum())} usable views: cannot estimate a wavefront")
+    dev = resolve_device(device)
+    views = as_tensor(v.reshape(n * n, *v.shape[2:])[used.ravel()], dev)
+    blk = _Block(views, cfg, used, lam, chunk)
+
+    ideal = _psf_bank(cfg, None, amplitude, device, psf_kw) if method == "geometric" else None
+    # geometric: accumulated absolute view shifts (pixels), starting from those of init
+    total = np.where(used[..., None], gradient_shifts(phi, matrix), 0.0)
+
+    def bank_for(phi_):
+        if method == "wave":
+            return _psf_bank(cfg, phi_, amplitude, device, psf_kw)
+        return geometric_psfs(ideal, total)
+
+    history: list[float] = []
+    fits: list[float] = []
+    s_full = np.zeros((n, n, 2))
+    image = None
+    from tqdm.auto import tqdm
+
+    bar = tqdm(total=max_iter, desc=f"DAO ({method})", disable=not progress, leave=False)
+    for _ in range(max_iter):
+        blk.set_psfs(bank_for(phi))
+        s = torch.zeros((views.shape[0], 2), device=dev, dtype=torch.float64)
+        for _k in range(inner):
+            image = blk.estimate(s.to(views.dtype))
+            s = blk.measure(image, max_shift_px)
+        s_full = np.full((n, n, 2), np.nan)
+        s_full[used] = to_numpy(s)
+        clipped = np.abs(s_full).max(axis=-1) >= max_shift_px - 1e-6
+        fit = fit_shifts(np.nan_to_num(s_full), cfg, mask=used & ~clipped, modes=modes,
+                         jmax=JMAX, matrix=matrix)
+        dz = fit.zernike
+        fits.append(fit.residual_rms)
+        history.append(zernike_rms(dz, modes))
+        phi = phi + dz
+        if method == "geometric":
+            total = total + np.where(used[..., None], np.nan_to_num(s_full) - fit.tilt, 0.0)
+        bar.update(1)
+        if history[-1] < tol:
+            break
+    bar.close()
+    return DaoResult(zernike=phi, history=history,
+                     shifts=total if method == "geometric" else np.nan_to_num(s_full),
+                     method=method, image=None if image is None else to_numpy(image) * blk.scale,
+                     fits=fits)
+
+
+def estimate_block_aberration(block_views, cfg: SystemConfig, method: str = "wave", init=None,
+                              device=None, **kw) -> tuple[np.ndarray, list[float]]:
+    """Estimate one block's aberration (the contract used by ``reconstruct``): returns the Noll
+    vector ``(45,)`` in waves and the r.m.s. of every phase update. ``kw`` go to
+    :func:`run_dao`. For ``method="geometric"`` reconstruct with :func:`block_psfs` (ideal PSFs
+    translated by the measured shifts), not with PSFs regenerated from this vector."""
+    res = run_dao(block_views, cfg, method=method, init=init, device=device, **kw)
+    return res.zernike.astype(np.float64), list(res.history)

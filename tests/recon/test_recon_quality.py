@@ -1,0 +1,134 @@
+"""ISA quality on the simulator's captures with the library's PSFs (slow: run with -m slow).
+
+References: ``cap.truth`` (simulate's contract: views_clean = S_d(H ⊛ truth), H = view_psfs);
+SSIM = skimage.metrics.structural_similarity with the truth's data range, PSNR likewise.
+"""
+
+import numpy as np
+import pytest
+from recon_standin import one_torch_thread  # noqa: F401
+
+pytestmark = pytest.mark.slow
+
+L = 12  # lenslets per side: a 180 x 180 px field
+
+
+def _ssim(truth, image):
+    from skimage.metrics import structural_similarity
+
+    return structural_similarity(truth, image, data_range=float(truth.max() - truth.min()))
+
+
+def _psnr(truth, image):
+    mse = float(np.mean((image.astype(np.float64) - truth) ** 2))
+    return 10 * np.log10(float(truth.max() - truth.min()) ** 2 / mse)
+
+
+@pytest.fixture(scope="module")
+def setup():
+    import metasensor as ms
+    from metasensor.simulate.capture import simulate
+    from metasensor.simulate.scenes import natural_image, resolution_chart
+
+    cfg = ms.SystemConfig()
+    bank = np.asarray(ms.view_psfs(cfg), np.float32)
+    size = L * 15 + 12
+    caps = {name: simulate(scene, cfg, snr_db=30.0, seed=0, comparison=False)
+            for name, scene in (("chart", resolution_chart(size)),
+                                ("camera", natural_image("camera", size)))}
+    return cfg, bank, caps
+
+
+def test_simulated_views_follow_the_forward_model(setup):
+    # The recon operator applied to cap.truth reproduces cap.views_clean in the field's interior
+    # (away from light entering from outside): relative residual < 1 %, scale within 1 %.
+    import torch
+
+    from metasensor.recon.forward import PhaseSpaceOperator, make_geometry
+
+    cfg, bank, caps = setup
+    cap = caps["camera"]
+    s = cap.views.shape[-1]
+    mask = cfg.view_mask()
+    g = make_geometry((s, s), cfg.scan_step_px, bank.shape[-1] // 2)
+    op = PhaseSpaceOperator(bank[mask], g, device="cpu")
+    dom = np.zeros(g.domain, np.float32)
+    oy, ox = g.offset
+    dom[oy:oy + s * 3, ox:ox + s * 3] = cap.truth
+    pred = op.forward(torch.from_numpy(dom)).numpy()[(slice(None), *g.sample_slices())]
+    m = 12
+    p, v = pred[:, m:-m, m:-m], cap.views_clean[mask][:, m:-m, m:-m]
+    assert np.linalg.norm(p - v) / np.linalg.norm(v) < 0.01
+    assert abs(v.sum() / p.sum() - 1) < 0.01
+
+
+@pytest.mark.parametrize("scene", ["chart", "camera"])
+def test_isa_beats_the_views_and_conserves_flux(setup, scene):
+    # Measured (180 px field, 30 dB): SSIM 0.52 (chart) and 0.67 (camera); the centre view
+    # (nearest up-sampled) scores far lower. Flux within 1 %; no NaN or negative values.
+    import metasensor as ms
+
+    cfg, bank, caps = setup
+    cap = caps[scene]
+    rec = ms.reconstruct(cap.views, cfg, psf=bank)
+    img = rec.image
+    assert np.isfinite(img).all() and img.min() >= 0
+    assert abs(img.sum() / cap.truth.sum() - 1) < 0.01
+    centre = np.kron(cap.views[7, 7], np.ones((3, 3), np.float32))
+    centre *= cap.truth.sum() / centre.sum()
+    s_isa, s_view = _ssim(cap.truth, img), _ssim(cap.truth, centre)
+    assert s_isa > s_view + 0.15
+    assert s_isa >= {"chart": 0.48, "camera": 0.62}[scene]
+
+
+@pytest.mark.xfail(strict=True, reason="issue 5 asks SSIM >= 0.90; measured 0.52 (chart) and "
+                   "0.67 (camera) at 30 dB: the summed view transfer function is 1e-4..1e-3 of DC "
+                   "at 0.15-0.45 cycles/px (the 15-px lenslet disk's zeros), see the report")
+@pytest.mark.parametrize("scene", ["chart", "camera"])
+def test_isa_ssim_090_acceptance(setup, scene):
+    import metasensor as ms
+
+    cfg, bank, caps = setup
+    cap = caps[scene]
+    assert _ssim(cap.truth, ms.reconstruct(cap.views, cfg, psf=bank).image) >= 0.90
+
+
+def _field_zernike(yn, xn):
+    z = np.zeros(np.broadcast(yn, xn).shape + (11,))
+    z[..., 3] = 0.4 * (xn**2 + yn**2)  # field curvature (defocus)
+    z[..., 4] = 0.8 * xn * yn  # astigmatism
+    z[..., 5] = 0.4 * (xn**2 - yn**2)
+    z[..., 6] = 0.3 * yn  # coma
+    z[..., 7] = 0.3 * xn
+    return z
+
+
+def test_multisite_true_local_aberrations_beat_one_global_psf():
+    # A field-dependent aberration (simulated per 4 x 4 field block); ISA in 4 x 4 blocks with the
+    # true local aberrations vs one global PSF (the field-mean aberration): >= 3 dB PSNR; no seam
+    # (mean gradient across each interior block border no larger than the largest row mean of the
+    # gradients in a band of +-15 px around it).
+    import metasensor as ms
+    from metasensor.optics.field import block_centres_normalised
+    from metasensor.simulate.capture import simulate
+    from metasensor.simulate.scenes import natural_image
+
+    cfg = ms.SystemConfig()
+    n = 16
+    grid = _field_zernike(*block_centres_normalised(4, 4))
+    cap = simulate(natural_image("camera", n * 15 + 12), cfg, field_zernike=grid, snr_db=30.0,
+                   seed=1, comparison=False)
+    local = ms.reconstruct(cap.views, cfg, field_zernike=grid, blocks=(4, 4))
+    glob = ms.reconstruct(cap.views, cfg, zernike=grid.reshape(16, -1).mean(0), blocks=(1, 1))
+    gain = _psnr(cap.truth, local.image) - _psnr(cap.truth, glob.image)
+    print(f"multisite PSNR gain {gain:.2f} dB")
+    assert gain >= 3.0
+    img = local.image
+    for b in local.blocks:
+        y0 = b.core[0]
+        if y0 == 0:
+            continue
+        grad = np.abs(np.diff(img, axis=0))
+        across = grad[y0 - 1].mean()
+        band = np.concatenate([grad[y0 - 16:y0 - 1], grad[y0:y0 + 15]]).mean(axis=1)
+        assert across <= band.max()
