@@ -80,15 +80,22 @@ def test_meta_imaging_beats_plain_light_field_camera():
     assert s5["badpix"] < 0.5 * s1["badpix"]
 
 
-def test_calibrated_warp_reduces_depth_error_by_30_percent():
-    # Field-dependent aberration (field curvature, astigmatism, coma growing with the field):
-    # per-view shift maps that vary smoothly over the field, added to the parallax.
+@cache
+def _aberrated_scene():
     tex, layers = synthetic.scene_slanted(SHAPE, -1.5, 1.5, seed=4)
     hv = SHAPE[0] // CFG.scan_step_px
     maps = synthetic.aberration_shift_maps(CFG, (hv, hv), curvature=0.15, astig=0.1, coma=0.1)
     sv = synthetic.render_views(tex, layers, CFG, shift_maps=maps, snr_db=30, seed=0)
+    raw = score(ms.estimate_depth(sv.views, CFG).disparity, sv.disparity,
+                evaluation_mask(sv.disparity, border=4))
+    return sv, maps, hv, raw
+
+
+def test_calibrated_warp_reduces_depth_error_by_30_percent():
+    # Field-dependent aberration (field curvature, astigmatism, coma growing with the field):
+    # per-view shift maps that vary smoothly over the field, added to the parallax.
+    sv, maps, hv, raw = _aberrated_scene()
     mask = evaluation_mask(sv.disparity, border=4)
-    raw = score(ms.estimate_depth(sv.views, CFG).disparity, sv.disparity, mask)
 
     class SystemAberrationLike:  # the DAO stage's object: .shift_maps(shape)
         def shift_maps(self, shape):
@@ -100,6 +107,25 @@ def test_calibrated_warp_reduces_depth_error_by_30_percent():
     print(f"RMSE without calibration {raw['rmse']:.4f}, with {cal['rmse']:.4f}")
     assert cal["rmse"] <= 0.7 * raw["rmse"]
     assert cal["badpix"] < raw["badpix"]
+
+
+def test_calibration_file_of_the_dao_stage(tmp_path):
+    # a SystemAberration (recon.system) holding the shifts on a coarse 9 x 9 grid, saved as
+    # system.h5 and passed by path: loaded lazily, resampled, and it still removes the error
+    from metasensor.recon.system import SystemAberration
+
+    sv, maps, hv, raw = _aberrated_scene()
+    idx = np.linspace(0, hv - 1, 9).round().astype(int)
+    sa = SystemAberration(zernike=np.zeros((1, 1, 45)), shift_grid=maps[..., idx[:, None], idx],
+                          view_shape=(hv, hv), config=CFG)
+    path = sa.save(tmp_path / "system.h5")
+    mask = evaluation_mask(sv.disparity, border=4)
+    by_path = ms.estimate_depth(sv.views, CFG, calibration=str(path))
+    by_maps = ms.estimate_depth(sv.views, CFG, calibration=sa.shift_maps((hv, hv)))
+    np.testing.assert_allclose(by_path.disparity, by_maps.disparity, atol=1e-6)
+    cal = score(by_path.disparity, sv.disparity, mask)
+    print(f"system.h5 (9 x 9 grid): RMSE {raw['rmse']:.4f} -> {cal['rmse']:.4f}")
+    assert cal["rmse"] <= 0.7 * raw["rmse"]
 
 
 def test_nine_by_nine_light_field_all_views_wide_range():

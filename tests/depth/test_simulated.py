@@ -49,10 +49,17 @@ def test_simulated_scenes_badpix_under_10_percent(kind):
     truth = _truth(depth, cap.config, cap.views.shape[2:])
     res = ms.estimate_depth(cap.views, cap.config)
     c = cap.config.center
-    mask = evaluation_mask(truth, cap.views_clean[c, c], edge_margin=3, texture_fraction=0.1)
+    # The simulator adds its depth layers without occlusion and its defocused PSFs spread each
+    # layer over the full-aperture blur, diameter 2·NA·|z|: within that radius of a depth edge the
+    # views mix both depths. Excluded: that radius at the largest |z| (in view px) + 1.
+    margin = int(np.ceil(CFG.na * np.abs(depth).max() / CFG.pixel_pitch / 3)) + 1
+    mask = evaluation_mask(truth, cap.views_clean[c, c], edge_margin=margin,
+                           texture_fraction=0.1)
     s = score(res.disparity, truth, mask)
+    s_all = score(res.disparity, truth)
     print(f"simulated {kind}: BadPix(0.07) {s['badpix']:.4f} MSE {s['mse']:.2e} "
-          f"(coverage {s['coverage']:.2f})")
+          f"(coverage {s['coverage']:.2f}, edge margin {margin}); all pixels BadPix "
+          f"{s_all['badpix']:.4f} MSE {s_all['mse']:.2e}")
     assert s["badpix"] < 0.10
 
 

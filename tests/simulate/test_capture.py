@@ -174,3 +174,17 @@ def test_depth_map_renders_each_layer_with_its_own_defocus():
     cent = [(win[u, c].sum(1) * rows).sum() / win[u, c].sum() for u in (c - 1, c + 1)]
     step = (cent[1] - cent[0]) / 2  # in view samples = pixels (d = 1)
     assert 0.5 * z / cfg.mla_focal < step < 1.2 * z / cfg.mla_focal
+
+
+def test_true_zernike_reported(standin):
+    grid = np.zeros((2, 2, 5))
+    grid[..., 4] = [[0.1, 0.2], [0.3, 0.4]]
+    cap = simulate(np.ones((132, 132), np.float32), CFG, zernike=[0, 0, 0, 0.5], scan=3,
+                   field_zernike=grid, comparison=False)
+    assert cap.zernike.shape == (2, 2, 5)
+    np.testing.assert_allclose(cap.zernike[..., 3], 0.5)
+    np.testing.assert_allclose(cap.zernike[..., 4], grid[..., 4])
+    np.testing.assert_allclose(cap.field_zernike, grid)
+    uni = simulate(np.ones((132, 132), np.float32), CFG, zernike=[0, 0, 0, 0.5], scan=3,
+                   comparison=False)
+    np.testing.assert_allclose(uni.zernike, [0, 0, 0, 0.5])

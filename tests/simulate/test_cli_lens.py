@@ -71,3 +71,19 @@ def test_single_lens_aberrations_grow_with_field():
     assert z2[5] == pytest.approx(w222 / (2 * math.sqrt(6)) / cfg.wavelength, rel=1e-9)
     with pytest.raises(ValueError, match="f_number"):
         SingleLens(f_number=0)
+
+
+def test_single_lens_drives_a_field_dependent_capture(standin):
+    from metasensor.simulate.capture import simulate
+
+    cfg = ms.SystemConfig(sensor_shape=(132, 132))
+    lens = SingleLens()
+    cap = simulate(np.ones((132, 132), np.float32), lens.config(cfg), scan=3,
+                   field_zernike=lens.field_zernike(cfg, (132, 132)), field_blocks=(2, 2),
+                   comparison=False)
+    g = cap.field_zernike
+    assert g.shape == (2, 2, 11)
+    # the four block centres sit symmetrically: same field curvature, mirrored astigmatism
+    np.testing.assert_allclose(g[..., 3], g[0, 0, 3])
+    np.testing.assert_allclose(g[0, 0, 4], -g[0, 1, 4])
+    assert g[0, 0, 3] > 0

@@ -14,6 +14,13 @@ Pipeline (system.md §2 step 7, the paper's Fig. 6):
 5. Disparity → image-side depth ``z = δ · d · mla_focal``; with the main-lens focal length and
    focus distance (config or keywords), → object distance by the thin-lens equation
    (``metasensor.depth.geometry`` states the signs).
+
+Written here by hand (no maintained Python library does plane-sweep stereo over a light-field
+view grid); the pieces follow the light-field literature as cited in each module. Memory: the
+used views twice (input copy, padded copy), the cost volume ``(candidates, H, W)`` float32 and a
+few ``(9, H, W)`` accumulators (about 2 GB for 113 views of 1,000 x 1,000, 64 candidates).
+Speed (benchmarks/bench_depth.py): 1,000 x 1,000 views, 113 views, 64 candidates, refinement
+included: about 53 s of CPU time on one core.
 """
 
 from __future__ import annotations

@@ -56,8 +56,10 @@ class Capture:
     frames (T, H', W') uint16 raw frames in ``scan_order``; views / views_clean
     (nnum, nnum, Ly·p, Lx·p) float32 (noisy = ``realign(frames)``, and noise-free unquantised);
     truth, sensor2d, hardware_ao (and their ``_clean`` versions) (Ly·nnum, Lx·nnum) float32;
-    zernike: the global Noll vector (waves) or None; field_zernike: (by, bx, J) vectors at the
-    block centres used (None if uniform); config: ``cfg`` with ``scan`` set to the period used.
+    zernike: the true Noll vector (waves; None = aberration-free) or, for field-dependent
+    aberrations, the total (global + field) vectors (by, bx, J) at the block centres rendered;
+    field_zernike: the field part alone at those centres (None if uniform); config: ``cfg`` with
+    ``scan`` set to the period used.
     """
 
     frames: np.ndarray
@@ -253,8 +255,13 @@ def simulate(scene, cfg: SystemConfig, zernike=None, field_zernike=None, depth=N
     crop = (slice(o, o + ly * n), slice(o, o + lx * n))
     truth = (reference[crop] * np.float32(scale)).astype(np.float32)
 
+    true_z = zernike
+    if grid is not None:  # total (global + field) vectors at the block centres
+        true_z = np.stack([np.stack([add_zernike(zernike, grid[i, j])
+                                     for j in range(grid.shape[1])])
+                           for i in range(grid.shape[0])])
     cap = Capture(frames=frames, views=views_noisy, views_clean=clean, truth=truth,
-                  zernike=zernike, sensor2d=None, hardware_ao=None, config=cfg,
+                  zernike=true_z, sensor2d=None, hardware_ao=None, config=cfg,
                   scan_order=order, noise=model, scale=float(scale),
                   snr_db=measure_snr(clean, views_noisy), offset=o, field_zernike=grid,
                   depth_planes=None if depth is None else planes, phase_screens=screens,

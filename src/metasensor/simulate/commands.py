@@ -64,11 +64,11 @@ def write_capture(cap, out: Path, figure: bool = True, clean: bool = False) -> l
         tif("sensor2d.tif", cap.sensor2d)
         tif("hardware_ao.tif", cap.hardware_ao)
     wf = {"noll": "z[j-1] is Noll index j, waves r.m.s.",
-          "zernike": None if cap.zernike is None else [float(v) for v in cap.zernike],
+          "zernike": None if cap.zernike is None else np.asarray(cap.zernike).tolist(),
           "field_zernike": None if cap.field_zernike is None else cap.field_zernike.tolist(),
           "ao_residual_rms": cap.ao_residual_rms}
     written.append(atomic_write_text(out / "wavefront.json", json.dumps(wf, indent=1)))
-    arr = cap.field_zernike if cap.field_zernike is not None else cap.zernike
+    arr = cap.zernike
     if arr is not None:
         with atomic_path(out / "wavefront.npy") as tmp:
             np.save(tmp, np.asarray(arr))
@@ -105,7 +105,7 @@ def capture_figure(cap, path: Path) -> Path:
         ax.set_title(title)
         ax.axis("off")
     fig.suptitle(f"scan {cap.config.scan}x{cap.config.scan}, SNR {cap.snr_db:.1f} dB")
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, 0, 1, 0.94))
     with atomic_path(path) as tmp:
         fig.savefig(tmp, dpi=100)
     plt.close(fig)

@@ -68,7 +68,7 @@ def collapse(fine: np.ndarray, factor: int = SUBSAMPLE, integrate: bool = False,
     ``upsample``: the scene model, see :func:`upsampler_response`.
     Returns ``(..., K, K)`` float32 with K odd, centre = zero displacement.
     """
-    fine = np.asarray(fine, dtype=np.float64)
+    fine = np.asarray(fine, dtype=np.float32)
     u1 = upsampler_response(factor, upsample)
     if integrate:
         u1 = np.convolve(u1, np.ones(factor))
@@ -80,7 +80,7 @@ def collapse(fine: np.ndarray, factor: int = SUBSAMPLE, integrate: bool = False,
     # A[k, f] = u(factor*k - (f - c)): (H ⊛ u)(factor*k) = Σ_f A[k, f] H(f), per axis
     g = factor * np.arange(-half, half + 1)[:, None] - (np.arange(kf)[None, :] - c)
     amat = np.where(np.abs(g) <= pad, u1[np.clip(g + pad, 0, len(u1) - 1)], 0.0)
-    at = torch.from_numpy(amat)
+    at = torch.from_numpy(amat.astype(np.float32))
     out = (at @ torch.from_numpy(fine.reshape(-1, kf, kf)) @ at.T).numpy()
     return out.reshape(*lead, 2 * half + 1, 2 * half + 1).astype(np.float32)
 

@@ -80,15 +80,17 @@ def apply_noise(clean: np.ndarray, model: NoiseModel, rng: np.random.Generator,
     flat_in, flat_out = clean.reshape(-1), out.reshape(-1)
     fs = model.full_scale
     for s in range(0, flat_in.size, chunk):
-        c = np.maximum(flat_in[s:s + chunk].astype(np.float64), 0.0)
+        c = np.maximum(flat_in[s:s + chunk], 0.0)
         if model.gain is None:
-            v = c
+            v = c.copy()
         else:
-            electrons = rng.poisson(c / model.gain).astype(np.float64)
+            v = rng.poisson(c.astype(np.float64) / model.gain).astype(np.float32)
             if model.read_noise > 0:
-                electrons += rng.normal(0.0, model.read_noise, size=c.shape)
-            v = electrons * model.gain
-        flat_out[s:s + chunk] = np.clip(np.rint(v), 0, fs)
+                v += np.float32(model.read_noise) * rng.standard_normal(c.shape, np.float32)
+            v *= np.float32(model.gain)
+        np.rint(v, out=v)
+        np.clip(v, 0, fs, out=v)
+        flat_out[s:s + chunk] = v
     return out
 
 
