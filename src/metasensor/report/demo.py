@@ -29,17 +29,18 @@ class DemoSettings:
     """What the demo simulates. ``size``: scene side in pixels. The scene is rendered at the
     sensor's pixel pitch, but its field positions are stretched over ``field_px`` sensor pixels
     (the prototype's full sensor height), so a small, fast scene still sees the aberrations of a
-    whole field: on axis sharp, at the corners ~2 waves r.m.s. of field curvature and
-    astigmatism. ``lens_strength`` scales the singlet's Seidel sums (2: a poor plastic lens);
+    whole field: on axis sharp, at the corners ~1 wave r.m.s. of field curvature and
+    astigmatism (the plain Seidel sums of a 135 mm f/10 plastic singlet; ``lens_strength``
+    scales them); ``field_blocks``: grid of PSF banks of the simulator;
     ``blocks``: multisite grid of the reconstruction."""
 
     size: int = 512
     scan: int = 5
     snr_db: float = 30.0
-    lens_strength: float = 2.0
+    lens_strength: float = 1.0
     field_px: int = 6004
     blocks: tuple[int, int] = (3, 3)
-    field_blocks: tuple[int, int] = (4, 4)
+    field_blocks: tuple[int, int] = (3, 3)
     iterations: int | None = None
     seed: int = 0
     extra: dict = field(default_factory=dict)
