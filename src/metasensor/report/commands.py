@@ -13,7 +13,7 @@ def register(app: typer.Typer) -> None:
     @app.command("demo")
     def demo(
         out: Path = typer.Option(Path("demo"), "--out", help="folder for the report"),
-        size: int = typer.Option(512, "--size", min=96, help="scene side in pixels"),
+        size: int = typer.Option(384, "--size", min=96, help="scene side in pixels"),
         scan: int = typer.Option(5, "--scan", help="scan period of the meta-imaging sensor"),
         snr: float = typer.Option(30.0, "--snr", help="SNR of the captures in dB"),
         blocks: str = typer.Option("3x3", "--blocks", help="multisite blocks, e.g. 4x4"),

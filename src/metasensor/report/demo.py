@@ -34,7 +34,7 @@ class DemoSettings:
     scales them); ``field_blocks``: grid of PSF banks of the simulator;
     ``blocks``: multisite grid of the reconstruction."""
 
-    size: int = 512
+    size: int = 384
     scan: int = 5
     snr_db: float = 30.0
     lens_strength: float = 1.0

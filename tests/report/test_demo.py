@@ -1,0 +1,43 @@
+"""Demo/report pieces: field-coordinate mapping sensor -> reconstruction grid, the HTML page,
+and (slow) the whole demo end to end."""
+
+import json
+
+import numpy as np
+import pytest
+
+import metasensor as ms
+from metasensor.report.demo import DemoSettings, run_demo, sensor_field_zernike
+from metasensor.report.html import write_html_report
+
+
+def test_sensor_field_zernike_maps_pixels_to_the_same_sensor_point():
+    cfg = ms.SystemConfig()  # scan 5: reconstruction pixel i = sensor pixel i + 6
+    sensor, image = (300, 240), (270, 210)
+    fz_sensor = lambda yn, xn: np.stack([yn, xn], axis=-1)  # noqa: E731 (identity map)
+    fz = sensor_field_zernike(fz_sensor, cfg, sensor, image)
+    y, x = 17, 200  # an image pixel
+    yn_i, xn_i = 2 * (y + 0.5) / image[0] - 1, 2 * (x + 0.5) / image[1] - 1
+    got = fz(np.array(yn_i), np.array(xn_i))
+    ys, xs = y + cfg.field_offset_px, x + cfg.field_offset_px
+    want = [2 * (ys + 0.5) / sensor[0] - 1, 2 * (xs + 0.5) / sensor[1] - 1]
+    np.testing.assert_allclose(got, want, atol=1e-12)
+
+
+def test_html_report_lists_table_and_figures(tmp_path):
+    summary = {"table": [{"sensor": "2D", "psnr_db": 20.0}], "figures": {"full": "f.png"},
+               "seconds": 1.5}
+    path = write_html_report(tmp_path / "index.html", summary)
+    text = path.read_text()
+    assert "<td>2D</td>" in text and "20.000" in text and 'src="f.png"' in text
+
+
+@pytest.mark.slow
+def test_demo_end_to_end(tmp_path):
+    summary = run_demo(tmp_path, DemoSettings(size=192, blocks=(2, 2), field_blocks=(2, 2)),
+                       progress=False)
+    assert (tmp_path / "index.html").is_file() and (tmp_path / "full_field.png").is_file()
+    rows = {r["sensor"]: r for r in json.loads((tmp_path / "summary.json").read_text())["table"]}
+    assert len(rows) == 3 and summary["seconds"] > 0
+    meta = rows["meta-imaging sensor (5x5 scan)"]
+    assert np.isfinite(meta["psnr_db"]) and meta["ssim"] > rows["2D sensor"]["ssim"] - 0.05
