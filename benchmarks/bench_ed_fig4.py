@@ -42,7 +42,7 @@ def one_case(scene_name: str, rms: float, draw: int, size: int, max_iter: int) -
     from metasensor.optics.zernike import random_zernike
     from metasensor.recon.dao import block_psfs, run_dao
     from metasensor.recon.wavefront import zernike_rms
-    from metasensor.simulate.scenes import load_scene
+    from metasensor.simulation.scenes import load_scene
 
     cfg = ms.SystemConfig()
     z = random_zernike(rms, seed=draw)

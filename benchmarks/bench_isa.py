@@ -145,8 +145,8 @@ def _quality_rows(iterations: int) -> list[dict]:
     import metasensor as ms
     from metasensor.recon.forward import PhaseSpaceOperator, make_geometry
     from metasensor.recon.isa import richardson_lucy, subset_major, view_order
-    from metasensor.simulate.capture import simulate
-    from metasensor.simulate.scenes import natural_image, resolution_chart
+    from metasensor.simulation.capture import simulate
+    from metasensor.simulation.scenes import natural_image, resolution_chart
 
     spec = importlib.util.spec_from_file_location("bsp", HERE / "bench_scan_period.py")
     bsp = importlib.util.module_from_spec(spec)
@@ -197,8 +197,8 @@ def _edge_rows() -> list[dict]:
 
     import metasensor as ms
     from metasensor.recon.api import reconstruct
-    from metasensor.simulate.capture import simulate
-    from metasensor.simulate.scenes import natural_image
+    from metasensor.simulation.capture import simulate
+    from metasensor.simulation.scenes import natural_image
 
     spec = importlib.util.spec_from_file_location("bsp", HERE / "bench_scan_period.py")
     bsp = importlib.util.module_from_spec(spec)

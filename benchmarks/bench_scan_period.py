@@ -52,8 +52,8 @@ def run(quick: bool = False) -> list[dict]:
     import metasensor as ms
     from metasensor.metrics import psnr
     from metasensor.recon.api import reconstruct
-    from metasensor.simulate.capture import simulate
-    from metasensor.simulate.scenes import natural_image, resolution_chart
+    from metasensor.simulation.capture import simulate
+    from metasensor.simulation.scenes import natural_image, resolution_chart
 
     lenslets = 8 if quick else 16
     size = lenslets * 15 + 14  # holds `lenslets` lenslets at every period (margin (p-1)·d <= 14)

@@ -32,9 +32,9 @@ def _child(size: int, nnum: int, blocks: int, scan: int) -> dict:
 
     torch.set_num_threads(int(os.environ.get("BENCH_THREADS", "2")))
     import metasensor as ms
-    from metasensor.simulate.capture import simulate
-    from metasensor.simulate.kernels import fine_view_bank
-    from metasensor.simulate.scenes import resolution_chart
+    from metasensor.simulation.capture import simulate
+    from metasensor.simulation.kernels import fine_view_bank
+    from metasensor.simulation.scenes import resolution_chart
 
     if nnum == 15:
         cfg = ms.SystemConfig(scan=scan)

@@ -22,15 +22,15 @@ _EXPORTS = {
     "realign": "metasensor.sensor.realign",
     "unrealign": "metasensor.sensor.realign",
     "scan_order": "metasensor.sensor.scan",
-    "simulate": "metasensor.simulate.capture",
-    "Capture": "metasensor.simulate.capture",
+    "simulate": "metasensor.simulation.capture",
+    "Capture": "metasensor.simulation.capture",
     "reconstruct": "metasensor.recon.api",
     "Reconstruction": "metasensor.recon.api",
     "correct_motion": "metasensor.motion.correct",
     "estimate_depth": "metasensor.depth.estimate",
     "DepthResult": "metasensor.depth.estimate",
 }
-_SUBMODULES = ("optics", "sensor", "simulate", "recon", "motion", "depth", "metrics", "io",
+_SUBMODULES = ("optics", "sensor", "simulation", "recon", "motion", "depth", "metrics", "io",
                "report")
 
 __all__ = sorted(_EXPORTS) + list(_SUBMODULES)

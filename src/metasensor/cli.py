@@ -16,7 +16,7 @@ app = typer.Typer(
 )
 
 _COMMAND_MODULES = (
-    "optics.commands", "simulate.commands", "sensor.commands", "recon.commands",
+    "optics.commands", "simulation.commands", "sensor.commands", "recon.commands",
     "recon.dao_commands", "motion.commands", "depth.commands", "metrics.commands",
     "report.commands",
 )

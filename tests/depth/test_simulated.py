@@ -3,7 +3,7 @@ phase-space PSFs, photon/read noise, realignment): the acceptance scenes with kn
 
 The simulator's ``depth`` is the image-side depth z [m]; the true disparity at view sample
 (Y, X) is ``z / (d · mla_focal)`` view px per view step, with z read at sensor pixel
-``(Y·d + nnum//2, X·d + nnum//2)`` (the lenslet centre, simulate.capture's docstring).
+``(Y·d + nnum//2, X·d + nnum//2)`` (the lenslet centre, simulation.capture docstring).
 Slow (PSF banks for every depth plane): not in the default suite.
 """
 

@@ -89,7 +89,7 @@ def test_simulator_resolution_chart():
     # the simulator's ISO 12233-style chart (12 slanted squares around a Siemens star, bar
     # groups): most square sides are found, and the sharp (area-sampled) chart has the MTF50 of
     # the square pixel aperture alone, sinc(f) = 0.5 at f = 0.603 cycles/pixel (tolerance 0.03)
-    from metasensor.simulate.scenes import resolution_chart
+    from metasensor.simulation.scenes import resolution_chart
 
     img = resolution_chart(512)
     fm = field_mtf(img)

@@ -27,8 +27,8 @@ def _psnr(truth, image):
 @pytest.fixture(scope="module")
 def setup():
     import metasensor as ms
-    from metasensor.simulate.capture import simulate
-    from metasensor.simulate.scenes import natural_image, resolution_chart
+    from metasensor.simulation.capture import simulate
+    from metasensor.simulation.scenes import natural_image, resolution_chart
 
     cfg = ms.SystemConfig()
     bank = np.asarray(ms.view_psfs(cfg), np.float32)
@@ -112,8 +112,8 @@ def test_multisite_true_local_aberrations_beat_one_global_psf():
     # than the largest row mean of the gradients in a band of +-15 px around it).
     import metasensor as ms
     from metasensor.optics.field import block_centres_normalised
-    from metasensor.simulate.capture import simulate
-    from metasensor.simulate.scenes import natural_image
+    from metasensor.simulation.capture import simulate
+    from metasensor.simulation.scenes import natural_image
 
     cfg = ms.SystemConfig()
     n = 16

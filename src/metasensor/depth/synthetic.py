@@ -1,6 +1,6 @@
 """Geometric test scenes for depth estimation: layered scenes rendered into every view with the
 light-field parallax (for tests and benchmarks; the wave-optics simulator is
-``metasensor.simulate``).
+``metasensor.simulation``).
 
 Model (docs/conventions.md, geometric optics): view (u, v) at view sample (Y, X) records the scene
 around image pixel ``P = (Y·d + d//2, X·d + d//2)``, ``d = nnum // scan``, shifted by the parallax

@@ -1,7 +1,7 @@
 """The end-to-end demo (``metasensor demo`` / ``make demo``).
 
 Simulate the built-in ISO 12233-style resolution chart through one cheap single lens with strong,
-field-dependent aberrations (:class:`metasensor.simulate.lens.SingleLens`); capture it with three
+field-dependent aberrations (:class:`metasensor.simulation.lens.SingleLens`); capture it with three
 sensors of the same pixel pitch and photon budget — a conventional 2D sensor, a plain light-field
 camera (1 x 1 scan) and the meta-imaging sensor (5 x 5 scan); realign the raw frames; reconstruct
 both light-field captures with the known system aberration in multisite blocks; and write a report
@@ -100,9 +100,9 @@ def run_demo(out: str | Path, settings: DemoSettings | None = None, progress: bo
     from metasensor.metrics import psnr, ssim
     from metasensor.report.figures import save_panel
     from metasensor.report.html import write_html_report
-    from metasensor.simulate.capture import simulate
-    from metasensor.simulate.lens import SingleLens
-    from metasensor.simulate.scenes import load_scene
+    from metasensor.simulation.capture import simulate
+    from metasensor.simulation.lens import SingleLens
+    from metasensor.simulation.scenes import load_scene
 
     s = settings or DemoSettings()
     out = Path(out)

@@ -7,9 +7,9 @@ import pytest
 from scipy import ndimage
 
 import metasensor as ms
-from metasensor.simulate.capture import simulate
-from metasensor.simulate.motion import Motion
-from metasensor.simulate.turbulence import Turbulence, screen_phase
+from metasensor.simulation.capture import simulate
+from metasensor.simulation.motion import Motion
+from metasensor.simulation.turbulence import Turbulence, screen_phase
 
 CFG = ms.SystemConfig(sensor_shape=(132, 132))
 

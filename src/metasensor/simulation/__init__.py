@@ -20,7 +20,7 @@ __all__ = sorted(_EXPORTS)
 
 def __getattr__(name: str):
     if name in _EXPORTS:
-        value = getattr(importlib.import_module(f"metasensor.simulate.{_EXPORTS[name]}"), name)
+        value = getattr(importlib.import_module(f"metasensor.simulation.{_EXPORTS[name]}"), name)
         globals()[name] = value
         return value
-    raise AttributeError(f"module 'metasensor.simulate' has no attribute {name!r}")
+    raise AttributeError(f"module 'metasensor.simulation' has no attribute {name!r}")

@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 import metasensor as ms
-from metasensor.simulate.capture import simulate
-from metasensor.simulate.noise import NoiseModel, add_noise, apply_noise, measure_snr
+from metasensor.simulation.capture import simulate
+from metasensor.simulation.noise import NoiseModel, add_noise, apply_noise, measure_snr
 
 
 @pytest.mark.parametrize("snr", [3.0, 10.0, 30.0])

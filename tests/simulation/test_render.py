@@ -6,8 +6,8 @@ import torch
 from scipy import ndimage
 from scipy.signal import convolve2d, fftconvolve
 
-from metasensor.simulate.kernels import collapse, crop_energy, upsampler_response
-from metasensor.simulate.render import Lattice, fft_size, sampled_conv
+from metasensor.simulation.kernels import collapse, crop_energy, upsampler_response
+from metasensor.simulation.render import Lattice, fft_size, sampled_conv
 
 
 @pytest.mark.parametrize("oy,sy,ox,sx", [(7, 3, 7, 3), (2, 5, 4, 1), (0, 1, 0, 1), (13, 15, 4, 15)])

@@ -6,7 +6,7 @@ import pytest
 import metasensor as ms
 from conftest import SMALL
 from metasensor.optics.field import block_centres_normalised
-from metasensor.simulate.capture import simulate
+from metasensor.simulation.capture import simulate
 
 CFG = ms.SystemConfig(sensor_shape=(132, 132))
 N = 15

@@ -1,7 +1,7 @@
 """Comparison sensors from the same scene, optics and photon budget.
 
 - a conventional 2D sensor: the scene blurred by the widefield PSF of the same (aberrated) lens,
-  integrated over the same pixels (the fine-grid model of :mod:`metasensor.simulate.kernels`);
+  integrated over the same pixels (the fine-grid model of :mod:`metasensor.simulation.kernels`);
 - hardware adaptive optics: an N × N segmented tip-tilt(-piston) mirror conjugate to the pupil,
   its segments tiling the square around the pupil, measuring the wavefront perfectly. The residual
   is the wavefront minus its per-segment least-squares piston/tip/tilt fit (paper, Methods). The
@@ -101,7 +101,7 @@ def plain_lightfield(scene, cap, **kwargs):
     Its views sample the field every ``nnum`` pixels; note that its ``truth`` grid starts at
     sensor pixel 0 (offset ``(nnum − nnum) // 2``), not at ``cap``'s offset.
     """
-    from metasensor.simulate.capture import simulate
+    from metasensor.simulation.capture import simulate
 
     opts = dict(cap.options)
     opts.update(scan=1, scan_order=None, scale=cap.scale, snr_db=None,

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from metasensor.simulate.layers import build_components, depth_layers, field_grid
-from metasensor.simulate.scenes import (
+from metasensor.simulation.layers import build_components, depth_layers, field_grid
+from metasensor.simulation.scenes import (
     SCENES,
     checkerboard,
     load_scene,

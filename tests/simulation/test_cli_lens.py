@@ -10,7 +10,7 @@ from typer.testing import CliRunner
 
 import metasensor as ms
 from metasensor.cli import app
-from metasensor.simulate.lens import SingleLens
+from metasensor.simulation.lens import SingleLens
 
 
 def _run(args):
@@ -74,7 +74,7 @@ def test_single_lens_aberrations_grow_with_field():
 
 
 def test_single_lens_drives_a_field_dependent_capture(standin):
-    from metasensor.simulate.capture import simulate
+    from metasensor.simulation.capture import simulate
 
     cfg = ms.SystemConfig(sensor_shape=(132, 132))
     lens = SingleLens()

@@ -142,9 +142,9 @@ def register(app: typer.Typer) -> None:
         import numpy as np
 
         from metasensor.config import SystemConfig
-        from metasensor.simulate.capture import simulate
-        from metasensor.simulate.lens import SingleLens
-        from metasensor.simulate.scenes import load_scene
+        from metasensor.simulation.capture import simulate
+        from metasensor.simulation.lens import SingleLens
+        from metasensor.simulation.scenes import load_scene
 
         cfg = SystemConfig.from_toml(config) if config is not None else SystemConfig()
         if size < 8:
@@ -155,7 +155,7 @@ def register(app: typer.Typer) -> None:
             if rms < 0:
                 raise ValueError(f"--rms must be >= 0, got {rms}")
             from metasensor.optics.zernike import random_zernike
-            from metasensor.simulate.layers import add_zernike
+            from metasensor.simulation.layers import add_zernike
 
             z = add_zernike(z, np.asarray(random_zernike(rms, seed=seed), dtype=np.float64))
         field = None

@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 from conftest import SMALL
-from metasensor.simulate.capture import simulate
-from metasensor.simulate.comparison import SegmentedMirror, plain_lightfield
+from metasensor.simulation.capture import simulate
+from metasensor.simulation.comparison import SegmentedMirror, plain_lightfield
 
 
 def _wavefront(x, y):

@@ -8,11 +8,11 @@ is the lenslet centre at sensor pixel ``(Y·d + nnum//2, X·d + nnum//2)``. ``tr
 (i, j) is sensor pixel (i + o, j + o), o = (nnum − d) // 2, shape (Ly·nnum, Lx·nnum);
 ``sensor2d`` and ``hardware_ao`` are on the same grid.
 
-Forward model (inverse-crime free, :mod:`metasensor.simulate.kernels`): the scene is up-sampled
+Forward model (inverse-crime free, :mod:`metasensor.simulation.kernels`): the scene is up-sampled
 3× (cubic spline, flux preserving), blurred by ``view_psfs(subsample=3)`` (per field block and
-depth layer, :mod:`~metasensor.simulate.layers`; per frame under turbulence), sampled at the
+depth layer, :mod:`~metasensor.simulation.layers`; per frame under turbulence), sampled at the
 lenslet centres of each scan phase (each frame sees the scene at its own time under ``motion``),
-then photon + read noise and quantisation (:mod:`~metasensor.simulate.noise`), then
+then photon + read noise and quantisation (:mod:`~metasensor.simulation.noise`), then
 ``unrealign`` to raw frames. ``views = realign(frames)`` exactly.
 
 Intensity scale: detector counts (DN). The scene is multiplied by ``scale`` (DN per scene unit;
@@ -38,13 +38,13 @@ from metasensor.config import SystemConfig
 from metasensor.optics.field import evaluate_field_zernike
 from metasensor.sensor.realign import lenslet_counts, realign, unrealign
 from metasensor.sensor.scan import check_scan_order
-from metasensor.simulate import kernels as kern
-from metasensor.simulate.comparison import SegmentedMirror, zernike_wavefront
-from metasensor.simulate.layers import add_zernike, build_components, field_grid
-from metasensor.simulate.motion import Motion
-from metasensor.simulate.noise import NoiseModel, add_noise, apply_noise, measure_snr
-from metasensor.simulate.render import Lattice, sampled_conv
-from metasensor.simulate.turbulence import Turbulence, screen_phase
+from metasensor.simulation import kernels as kern
+from metasensor.simulation.comparison import SegmentedMirror, zernike_wavefront
+from metasensor.simulation.layers import add_zernike, build_components, field_grid
+from metasensor.simulation.motion import Motion
+from metasensor.simulation.noise import NoiseModel, add_noise, apply_noise, measure_snr
+from metasensor.simulation.render import Lattice, sampled_conv
+from metasensor.simulation.turbulence import Turbulence, screen_phase
 
 __all__ = ["Capture", "simulate"]
 
@@ -201,10 +201,10 @@ def simulate(scene, cfg: SystemConfig, zernike=None, field_zernike=None, depth=N
         raise ValueError(f"exposure must lie in (0, 1], got {exposure!r}")
     if motion is not None:
         if not isinstance(motion, Motion):
-            raise TypeError("motion must be a metasensor.simulate.Motion")
+            raise TypeError("motion must be a metasensor.simulation.Motion")
         motion.check(shape)
     if turbulence is not None and not isinstance(turbulence, Turbulence):
-        raise TypeError("turbulence must be a metasensor.simulate.Turbulence")
+        raise TypeError("turbulence must be a metasensor.simulation.Turbulence")
     dev = resolve_device(device)
     seeds = np.random.SeedSequence(seed).spawn(4)
     options = dict(zernike=zernike, field_zernike=field_zernike, depth=depth, motion=motion,
