@@ -25,7 +25,8 @@ class ConfigError(ValueError):
     """An impossible or inconsistent system parameter (one line, naming the parameter)."""
 
 
-def _toml_value(value: Any) -> str:
+def toml_value(value: Any) -> str:
+    """One TOML value (bool, int, float with exact repr, str, list); ConfigError otherwise."""
     if isinstance(value, bool):
         return "true" if value else "false"
     if isinstance(value, int):
@@ -38,7 +39,7 @@ def _toml_value(value: Any) -> str:
     if isinstance(value, str):
         return json.dumps(value)
     if isinstance(value, (tuple, list)):
-        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
+        return "[" + ", ".join(toml_value(v) for v in value) + "]"
     raise ConfigError(f"cannot write value of type {type(value).__name__} to TOML")
 
 
@@ -252,7 +253,7 @@ class SystemConfig:
         for key, value in self.to_dict().items():
             if value is None:
                 continue
-            lines.append(f"{key} = {_toml_value(value)}")
+            lines.append(f"{key} = {toml_value(value)}")
         return "\n".join(lines) + "\n"
 
     @classmethod

@@ -15,7 +15,6 @@ its position at phase (0, 0) (nominal: ``M @ nominal_rect[k]``).
 from __future__ import annotations
 
 import dataclasses
-import json
 import math
 import tomllib
 from dataclasses import dataclass
@@ -23,24 +22,9 @@ from pathlib import Path
 
 import numpy as np
 
+from metasensor.config import toml_value
+
 __all__ = ["Calibration"]
-
-
-def _fmt(value) -> str:
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, int):
-        return str(value)
-    if isinstance(value, float):
-        if not math.isfinite(value):
-            raise ValueError(f"cannot write non-finite value {value!r} to TOML")
-        text = repr(value)
-        return text if any(ch in text for ch in ".eE") else text + ".0"
-    if isinstance(value, str):
-        return json.dumps(value)
-    if isinstance(value, (tuple, list)):
-        return "[" + ", ".join(_fmt(v) for v in value) + "]"
-    raise ValueError(f"cannot write {type(value).__name__} to TOML")
 
 
 @dataclass(frozen=True)
@@ -166,7 +150,7 @@ class Calibration:
             value = getattr(self, f.name)
             if value is None:
                 continue
-            lines.append(f"{f.name} = {_fmt(value)}")
+            lines.append(f"{f.name} = {toml_value(value)}")
         if self.offsets is not None:
             err = self.offset_errors()
             lines.append("# measured - nominal offsets [px]: " + ", ".join(
