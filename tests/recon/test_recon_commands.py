@@ -76,3 +76,24 @@ def test_psf_file_and_zernike_parsing(files):
     (files / "bad.h5").write_bytes(b"not hdf5")
     with pytest.raises(ValueError, match="HDF5"):
         read_psf_file(files / "bad.h5")
+
+
+def test_cli_system_aberration_file_sets_the_field_map(files):
+    from metasensor.recon.system import SystemAberration
+
+    grid = np.zeros((2, 2, 45))
+    grid[..., 3] = 0.25  # reported per block (the given PSF bank is used as is)
+    sa = SystemAberration(zernike=grid, shift_grid=np.zeros((5, 5, 2, 2, 2)), view_shape=(50, 50),
+                          config=CFG)
+    sa.save(files / "system.h5")
+    out = files / "out_sys"
+    res = CliRunner().invoke(app, ["reconstruct", str(files / "views.tif"), "--psf",
+                                   str(files / "psf.h5"), "--blocks", "2x2", "--overlap", "6",
+                                   "--iterations", "1", "--system", str(files / "system.h5"),
+                                   "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    np.testing.assert_array_equal(np.load(out / "zernike.npy"), grid)
+    res = CliRunner().invoke(app, ["reconstruct", str(files / "views.tif"), "--psf",
+                                   str(files / "psf.h5"), "--system", str(files / "none.h5"),
+                                   "--out", str(out)])
+    assert res.exit_code != 0 and "not found" in str(res.exception)

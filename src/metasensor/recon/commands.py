@@ -124,7 +124,11 @@ def register(app: typer.Typer) -> None:
         out: Path = typer.Option(..., "--out", help="output folder"),
         psf: Path | None = typer.Option(None, "--psf", help="PSF bank (HDF5, dataset 'psf')"),
         config: Path | None = typer.Option(None, "--config", help="system configuration TOML"),
-        method: str = typer.Option("isa", help="isa | wave | geometric (DAO first)"),
+        method: str = typer.Option("isa", "--method", "--dao",
+                                   help="isa | wave | geometric (DAO first)"),
+        system: Path | None = typer.Option(
+            None, "--system", help="system aberration (system.h5 from calibrate-aberration): "
+            "its field map initialises DAO, or is used as is with --method isa"),
         blocks: str = typer.Option("1x1", help="multisite blocks, e.g. 4x4"),
         overlap: int = typer.Option(20, help="block overlap in output pixels"),
         iterations: int | None = typer.Option(None, help="Richardson-Lucy iterations"),
@@ -140,6 +144,8 @@ def register(app: typer.Typer) -> None:
         """Reconstruct the all-in-focus image from views (ISA; multisite blocks through Dask).
 
         Example: metasensor reconstruct cap/views.tif --config cfg.toml --blocks 4x4 --out result/
+
+        With DAO: metasensor reconstruct views.tif --dao wave --system system.h5 --out result/
         """
         from metasensor.config import SystemConfig
         from metasensor.io.views import read_config_from_views, read_views
@@ -166,6 +172,14 @@ def register(app: typer.Typer) -> None:
             if not field_zernike.is_file():
                 raise FileNotFoundError(f"field Zernike file not found: {field_zernike}")
             fz = np.load(field_zernike)
+        if system is not None:
+            if fz is not None:
+                raise ValueError("give either --system or --field-zernike, not both")
+            from metasensor.recon.system import SystemAberration
+
+            if not system.is_file():
+                raise FileNotFoundError(f"system aberration file not found: {system}")
+            fz = SystemAberration.load(system).zernike
         target = None
         if zarr_out:
             import zarr
