@@ -103,13 +103,11 @@ def _field_zernike(yn, xn, strength=3.0):
     return strength * z
 
 
-def test_multisite_true_local_aberrations_beat_one_global_psf():
+@pytest.fixture(scope="module")
+def multisite():
     # A field-dependent aberration (simulated per 4 x 4 field block, up to ~1.8 waves r.m.s. in
     # the corners); ISA in 4 x 4 blocks with the true local aberrations vs one global PSF (the
-    # field-mean aberration). Issue 5 asks >= 3 dB PSNR; measured 2.78 dB (21.50 vs 18.72 dB;
-    # at a third of this strength 0.59 dB: the sensor is robust to moderate aberrations), so this
-    # asserts > 2 dB, and no seam (mean gradient across each interior block border no larger
-    # than the largest row mean of the gradients in a band of +-15 px around it).
+    # field-mean aberration).
     import metasensor as ms
     from metasensor.optics.field import block_centres_normalised
     from metasensor.simulation.capture import simulate
@@ -122,9 +120,22 @@ def test_multisite_true_local_aberrations_beat_one_global_psf():
                    seed=1, comparison=False)
     local = ms.reconstruct(cap.views, cfg, field_zernike=grid, blocks=(4, 4))
     glob = ms.reconstruct(cap.views, cfg, zernike=grid.reshape(16, -1).mean(0), blocks=(1, 1))
+    return cap, local, glob
+
+
+@pytest.mark.xfail(strict=True, reason="issue 5 asks >= 3 dB; measured 2.78 dB (21.50 vs "
+                   "18.72 dB; 0.59 dB at a third of this strength)")
+def test_multisite_true_local_aberrations_beat_one_global_psf_by_3db(multisite):
+    cap, local, glob = multisite
     gain = _psnr(cap.truth, local.image) - _psnr(cap.truth, glob.image)
     print(f"multisite PSNR gain {gain:.2f} dB")
-    assert gain > 2.0
+    assert gain >= 3.0
+
+
+def test_multisite_has_no_seams(multisite):
+    # mean gradient across each interior block border no larger than the largest row mean of the
+    # gradients in a band of +-15 px around it
+    _, local, _ = multisite
     img = local.image
     grad = np.abs(np.diff(img, axis=0))
     for b in local.blocks:

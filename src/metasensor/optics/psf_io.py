@@ -68,8 +68,9 @@ def save_psf(path: str | Path, psf: np.ndarray, cfg: SystemConfig, zernike=None,
     return path
 
 
-def load_psf(path: str | Path) -> tuple[np.ndarray, SystemConfig]:
-    """Read a bank written by :func:`save_psf` -> (psf float32 [u, v, y, x], config)."""
+def load_psf(path: str | Path, with_attrs: bool = False):
+    """Read a bank written by :func:`save_psf` -> (psf float32 [u, v, y, x], config), plus the
+    file's attributes (``subsample``, ``zernike``, ``depth``, ...) as a dict if ``with_attrs``."""
     import h5py
 
     path = Path(path)
@@ -80,14 +81,15 @@ def load_psf(path: str | Path) -> tuple[np.ndarray, SystemConfig]:
             if "psf" not in f:
                 raise ValueError(f"{path}: no dataset 'psf' (not a metasensor PSF file)")
             psf = np.asarray(f["psf"], dtype=np.float32)
-            cfg = SystemConfig.from_json(str(f.attrs["config"]))
+            attrs = dict(f["psf"].attrs) | dict(f.attrs)
+            cfg = SystemConfig.from_json(str(attrs["config"]))
     except OSError as exc:
         raise ValueError(f"{path}: not a readable HDF5 file ({exc})") from None
     except (KeyError, json.JSONDecodeError) as exc:
         raise ValueError(f"{path}: missing or corrupt config attribute ({exc})") from None
     if psf.shape[:2] != (cfg.nnum, cfg.nnum):
         raise ValueError(f"{path}: psf shape {psf.shape} does not match nnum {cfg.nnum}")
-    return psf, cfg
+    return (psf, cfg, attrs) if with_attrs else (psf, cfg)
 
 
 def plot_views(psf: np.ndarray, cfg: SystemConfig, path: str | Path, title: str = "",

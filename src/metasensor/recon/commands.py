@@ -8,61 +8,18 @@ from pathlib import Path
 import numpy as np
 import typer
 
-__all__ = ["register", "read_psf_file", "parse_zernike", "write_outputs"]
-
-
-def parse_zernike(text: str | None) -> np.ndarray | None:
-    """``"4:0.5,7:-0.2"`` (Noll index: waves) -> Noll vector (45,), or None for empty."""
-    if not text:
-        return None
-    z = np.zeros(45)
-    for item in text.split(","):
-        try:
-            j, value = item.split(":")
-            j, value = int(j), float(value)
-        except ValueError:
-            raise ValueError(f"--zernike item {item!r} is not 'noll:waves' (e.g. 4:0.5)") from None
-        if j < 1:
-            raise ValueError(f"--zernike Noll index must be >= 1, got {j}")
-        if j > z.size:
-            z = np.pad(z, (0, j - z.size))
-        z[j - 1] = value
-    return z
+__all__ = ["register", "read_psf_file", "write_outputs"]
 
 
 def read_psf_file(path: Path):
-    """PSF bank (nnum, nnum, K, K) and its SystemConfig (or None) from an HDF5 file ("psf")."""
-    import h5py
+    """PSF bank (nnum, nnum, K, K) and its SystemConfig from a ``metasensor psf`` HDF5 file
+    (:func:`metasensor.optics.psf_io.load_psf`); refuses banks sampled finer than the pixels."""
+    from metasensor.optics.psf_io import load_psf
 
-    from metasensor.config import SystemConfig
-
-    if not path.is_file():
-        raise FileNotFoundError(f"PSF file not found: {path}")
-    try:
-        with h5py.File(path, "r") as f:
-            if "psf" not in f:
-                raise ValueError(f"{path}: no dataset 'psf'")
-            bank = np.asarray(f["psf"][...], dtype=np.float32)
-            attrs = dict(f["psf"].attrs) | dict(f.attrs)
-    except OSError as exc:
-        raise ValueError(f"{path}: not a readable HDF5 file ({exc})") from None
+    bank, cfg, attrs = load_psf(path, with_attrs=True)
     if int(np.ravel(attrs.get("subsample", 1))[0]) != 1:
         raise ValueError(f"{path}: PSF bank sampled at pixel_pitch/{attrs['subsample']}; "
                          "reconstruction needs subsample 1")
-    cfg = None
-    for key in ("config", "system", "cfg"):
-        if key in attrs:
-            text = attrs[key]
-            cfg = SystemConfig.from_json(text.decode() if isinstance(text, bytes) else str(text))
-            break
-    if cfg is None:
-        names = set(SystemConfig.__dataclass_fields__)
-        fields = {k: (v.item() if hasattr(v, "item") and np.ndim(v) == 0 else v)
-                  for k, v in attrs.items() if k in names}
-        if fields:
-            if "sensor_shape" in fields:
-                fields["sensor_shape"] = tuple(int(s) for s in np.ravel(fields["sensor_shape"]))
-            cfg = SystemConfig.from_dict(fields)
     return bank, cfg
 
 
@@ -149,6 +106,7 @@ def register(app: typer.Typer) -> None:
         """
         from metasensor.config import SystemConfig
         from metasensor.io.views import read_config_from_views, read_views
+        from metasensor.optics.psf_io import parse_zernike
         from metasensor.recon.api import reconstruct
 
         if psf is not None and config is not None:

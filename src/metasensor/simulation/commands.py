@@ -7,26 +7,7 @@ from pathlib import Path
 
 import typer
 
-
-def _parse_zernike(text: str):
-    import numpy as np
-
-    coeffs = {}
-    for item in text.split(","):
-        item = item.strip()
-        if not item:
-            continue
-        try:
-            j, c = item.split(":")
-            coeffs[int(j)] = float(c)
-        except ValueError:
-            raise ValueError(f"--zernike must look like '4:0.5,7:-0.2', got {text!r}") from None
-        if int(j) < 1:
-            raise ValueError(f"--zernike: Noll index must be >= 1, got {j}")
-    z = np.zeros(max(coeffs, default=0))
-    for j, c in coeffs.items():
-        z[j - 1] = c
-    return z
+from metasensor.optics.psf_io import parse_zernike
 
 
 def write_capture(cap, out: Path, figure: bool = True, clean: bool = False) -> list[Path]:
@@ -150,7 +131,7 @@ def register(app: typer.Typer) -> None:
         if size < 8:
             raise ValueError(f"--size must be at least 8, got {size}")
         img = load_scene(scene, size)
-        z = _parse_zernike(zernike) if zernike else None
+        z = parse_zernike(zernike)
         if rms:
             if rms < 0:
                 raise ValueError(f"--rms must be >= 0, got {rms}")
