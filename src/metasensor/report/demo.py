@@ -41,7 +41,11 @@ class DemoSettings:
     field_px: int = 6004
     blocks: tuple[int, int] = (3, 3)
     field_blocks: tuple[int, int] = (3, 3)
-    iterations: int | None = None
+    # ISA iterations (the library default is 5). Measured on this demo (meta-imaging row): 5 its
+    # PSNR 16.52 dB, SSIM 0.617, edge MTF50 0.108 c/px; 6 its 16.61 dB, 0.608, 0.138; 8 its
+    # 16.66 dB, 0.590, 0.151 (2D sensor 0.037): 6 sharpens the aberrated field edge most for
+    # the least SSIM.
+    iterations: int | None = 6
     seed: int = 0
     extra: dict = field(default_factory=dict)
 
