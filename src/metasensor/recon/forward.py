@@ -189,22 +189,39 @@ class PhaseSpaceOperator:
     def backproject_spectrum(self, samples: torch.Tensor, views: slice | torch.Tensor,
                              out: torch.Tensor | None = None) -> torch.Tensor:
         """Accumulate Σ_views conj(OTF)·spectrum(S_dᵀ samples) into a half spectrum (Ny, Nh)."""
-        d = self.geometry.d
-        my, _ = self.geometry.grid
-        ny, nx = self.geometry.domain
-        nh = nx // 2 + 1
-        small = torch.fft.fft2(samples)  # (c, My, Mx): the zero-filled array's spectrum, tiled
-        tiled = small[..., self._cols].conj()  # (c, My, Nh)
-        otf = self.otf[views]
-        # accumulate conj(Σ OTF·conj(U)) = Σ conj(OTF)·U without materialising conj(OTF)
-        acc = torch.zeros((d, my, nh), dtype=torch.complex64, device=self.device)
-        for i in range(otf.shape[0]):
-            acc.addcmul_(otf[i].view(d, my, nh), tiled[i][None])
-        acc = acc.conj().reshape(ny, nh)
+        ny, _ = self.geometry.domain
+        acc = self.backproject_conj(samples, views)
+        acc = acc.conj().reshape(ny, -1)
         if out is None:
-            return acc
+            return acc.resolve_conj()
         out += acc
         return out
+
+    def new_conj_accumulator(self) -> torch.Tensor:
+        """Zeroed (d, My, Nx//2+1) accumulator for :meth:`backproject_conj`."""
+        d = self.geometry.d
+        my, _ = self.geometry.grid
+        nh = self.geometry.domain[1] // 2 + 1
+        return torch.zeros((d, my, nh), dtype=torch.complex64, device=self.device)
+
+    def backproject_conj(self, samples: torch.Tensor, views: slice | torch.Tensor,
+                         acc: torch.Tensor | None = None) -> torch.Tensor:
+        """Accumulate the *conjugate* of the back-projected half spectrum, Σ OTF·conj(U), into
+        ``acc`` (d, My, Nh) in place; ``acc.conj().reshape(Ny, Nh)`` is the spectrum of Aᵀ·samples.
+        Conjugating once per sum instead of once per view chunk saves a full-size copy per chunk;
+        conj(fft2(x)) of the real samples is their unnormalised inverse FFT (no copy either)."""
+        d = self.geometry.d
+        my, mx = self.geometry.grid
+        nh = self.geometry.domain[1] // 2 + 1
+        if acc is None:
+            acc = self.new_conj_accumulator()
+        small_conj = torch.fft.ifft2(samples, norm="forward")  # = conj(fft2(samples)), real input
+        reps = -(-nh // mx)
+        tiled = small_conj.repeat(1, 1, reps)[..., :nh] if reps > 1 else small_conj[..., :nh]
+        otf = self.otf[views]
+        for i in range(otf.shape[0]):
+            acc.addcmul_(otf[i].view(d, my, nh), tiled[i][None])
+        return acc
 
     def image_from_spectrum(self, spec: torch.Tensor) -> torch.Tensor:
         ny, nx = self.geometry.domain
@@ -235,14 +252,14 @@ class PhaseSpaceOperator:
         if tuple(samples.shape) != (n, *self.geometry.grid):
             raise ValueError(f"samples must have shape {(n, *self.geometry.grid)}, "
                              f"got {tuple(samples.shape)}")
-        ny, nx = self.geometry.domain
-        acc = torch.zeros((ny, nx // 2 + 1), dtype=torch.complex64, device=self.device)
+        ny, _ = self.geometry.domain
+        acc = self.new_conj_accumulator()
         start = 0
         for c in self._chunks(views):
             count = len(range(self.n_views)[c]) if isinstance(c, slice) else len(c)
-            self.backproject_spectrum(samples[start:start + count], c, out=acc)
+            self.backproject_conj(samples[start:start + count], c, acc)
             start += count
-        return self.image_from_spectrum(acc)
+        return self.image_from_spectrum(acc.conj().reshape(ny, -1))
 
     def sensitivity(self, mask: torch.Tensor, views=None) -> torch.Tensor:
         """Aᵀ applied to ``mask`` (My, Mx) on every view in ``views``: (Ny, Nx), >= 0 up to fp."""

@@ -143,15 +143,16 @@ def richardson_lucy(op: PhaseSpaceOperator, data: torch.Tensor, mask: torch.Tens
         sq = 0.0
         for g, s, v in zip(idx, sens, valid, strict=True):
             spec = op.spectrum(estimate)
-            acc = torch.zeros((ny, nx // 2 + 1), dtype=torch.complex64, device=dev)
+            acc = op.new_conj_accumulator()
             for start in range(g.start, g.stop, op.chunk):
                 c = slice(start, min(start + op.chunk, g.stop))
                 pred = op.predict(spec, c)
                 y = data[c]
-                sq += float(torch.sum(((y - pred) * maskf) ** 2))
-                ratio = y / torch.clamp(pred, min=floor) * maskf
-                op.backproject_spectrum(ratio, c, out=acc)
-            back = op.image_from_spectrum(acc)
+                resid = torch.sub(y, pred).mul_(maskf)
+                sq += float(torch.vdot(resid.flatten(), resid.flatten()))
+                ratio = torch.div(y, pred.clamp_(min=floor), out=pred).mul_(maskf)
+                op.backproject_conj(ratio, c, acc)
+            back = op.image_from_spectrum(acc.conj().reshape(ny, nx // 2 + 1))
             update = torch.where(v, torch.clamp(back, min=0.0) / s, torch.ones_like(s))
             estimate = estimate * update
         history.append(math.sqrt(sq) / data_norm)
