@@ -62,6 +62,7 @@ class DaoResult:
     image: np.ndarray | None = None
     fits: list[float] = field(default_factory=list)
     psf_size: int | None = None  # K of the banks (None: view_psfs' default 99.5 % window)
+    estimates: list[np.ndarray] = field(default_factory=list)  # φ (45,) after every update
 
 
 # ----------------------------------------------------------------------------- PSF banks
@@ -342,6 +343,7 @@ def run_dao(block_views, cfg: SystemConfig, method: str = "wave", init=None, dev
 
     history: list[float] = []
     fits: list[float] = []
+    estimates: list[np.ndarray] = []
     s_full = np.zeros((n, n, 2))
     image = None
     from tqdm.auto import tqdm
@@ -362,6 +364,7 @@ def run_dao(block_views, cfg: SystemConfig, method: str = "wave", init=None, dev
         fits.append(fit.residual_rms)
         history.append(zernike_rms(dz, modes))
         phi = phi + dz
+        estimates.append(phi.copy())
         if method == "geometric":
             total = total + np.where(used[..., None], np.nan_to_num(s_full) - fit.tilt, 0.0)
         bar.update(1)
@@ -371,7 +374,7 @@ def run_dao(block_views, cfg: SystemConfig, method: str = "wave", init=None, dev
     return DaoResult(zernike=phi, history=history,
                      shifts=total if method == "geometric" else np.nan_to_num(s_full),
                      method=method, image=None if image is None else to_numpy(image) * blk.scale,
-                     fits=fits, psf_size=size_for(phi))
+                     fits=fits, psf_size=size_for(phi), estimates=estimates)
 
 
 def estimate_block_aberration(block_views, cfg: SystemConfig, method: str = "wave", init=None,
