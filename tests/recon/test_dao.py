@@ -143,6 +143,8 @@ def test_wave_dao_three_waves():
 @pytest.mark.slow
 def test_wave_dao_noise_10db():
     # acceptance (Extended Data Fig. 5): residual ≤ 0.2 λ at 1 λ input and SNR 10 dB
+    # measured (auto PSF window): 0.335, 0.157, 0.131 λ after updates 1-3 (update r.m.s. 0.851,
+    # 0.274, 0.126, so all 3 run); a 4th gives 0.169 (noise floor); lam = 2e3: 0.175, 0.146, 0.120
     resid, _ = _residual_case(1.0, 10, 4)
     assert resid <= 0.2
 
