@@ -196,6 +196,8 @@ def test_ray_reach_tilt_and_defocus_analytic():
         ray_reach_px(CFG, [0.0, np.nan])
     with pytest.raises(ValueError, match="psf_size"):
         run_dao(np.ones((15, 15, 20, 20)), CFG, psf_size=40)
+    with pytest.raises(ValueError, match="clipped_views"):
+        run_dao(np.ones((15, 15, 20, 20)), CFG, clipped_views="maybe")
 
 
 @pytest.mark.slow
