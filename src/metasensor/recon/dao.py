@@ -42,7 +42,8 @@ from metasensor.recon.wavefront import (
 )
 from metasensor.recon.wavefront import predicted_shifts as _predicted
 
-__all__ = ["estimate_block_aberration", "DaoResult", "run_dao", "geometric_psfs", "block_psfs"]
+__all__ = ["estimate_block_aberration", "DaoResult", "run_dao", "geometric_psfs", "block_psfs",
+           "ray_reach_px", "psf_window"]
 
 JMAX = 45
 
@@ -60,9 +61,53 @@ class DaoResult:
     method: str
     image: np.ndarray | None = None
     fits: list[float] = field(default_factory=list)
+    psf_size: int | None = None  # K of the banks (None: view_psfs' default 99.5 % window)
+    estimates: list[np.ndarray] = field(default_factory=list)  # φ (45,) after every update
 
 
 # ----------------------------------------------------------------------------- PSF banks
+def ray_reach_px(cfg: SystemConfig, zernike, mask=None, subsample: int = 5) -> float:
+    """Largest geometric ray displacement (image pixels), ``k |∇W|`` with k = (λ/NA)/pitch, over
+    the pupil footprints of the views in ``mask`` (default ``cfg.view_mask()``; each footprint a
+    square of side 1/pupil_radius_px around the view's pupil point, sampled by ``subsample²``
+    points, clipped to the pupil). Tip and tilt included. 0 for None / a zero vector."""
+    from metasensor.optics.zernike import zernike_gradients
+    from metasensor.recon.wavefront import shift_scale
+
+    if zernike is None:
+        return 0.0
+    z = np.asarray(zernike, dtype=np.float64).ravel()
+    if not np.isfinite(z).all():
+        raise ValueError("zernike contains NaN or infinite values")
+    if not np.any(z):
+        return 0.0
+    m = cfg.view_mask() if mask is None else np.asarray(mask, dtype=bool)
+    rho_x, rho_y = cfg.pupil_coords()
+    off = ((np.arange(subsample) + 0.5) / subsample - 0.5) / cfg.pupil_radius_px
+    px = (rho_x[m][:, None, None] + off[None, None, :]).repeat(subsample, axis=1)
+    py = (rho_y[m][:, None, None] + off[None, :, None]).repeat(subsample, axis=2)
+    inside = px * px + py * py <= 1.0
+    g = np.tensordot(z, zernike_gradients(px[inside], py[inside], jmax=max(z.size, 3))[:z.size],
+                     axes=(0, 0))  # (2, P) waves per unit rho
+    return float(shift_scale(cfg) * np.sqrt((g**2).sum(axis=0)).max()) if g.size else 0.0
+
+
+def psf_window(cfg: SystemConfig, zernike=None, mask=None, margin: float | None = None) -> int:
+    """Odd PSF window K (pixels) for DAO and ISA banks of the views in ``mask``:
+    ``2·ceil(reach + margin) + 1``, reach = :func:`ray_reach_px`, margin (pixels; default one
+    lenslet, ``nnum``, plus 10 λ/NA of sub-aperture diffraction). Much smaller than
+    ``view_psfs``' default window (99.5 % of the light of *all* views, sized by the ray reach at
+    the pupil rim, where high-order Zernike gradients peak), which the dark outer views need but
+    the used ones do not; the light it drops is measured in ``tests/recon/test_dao.py``."""
+    from metasensor.recon.wavefront import shift_scale
+
+    if margin is None:
+        margin = cfg.nnum + 10.0 * shift_scale(cfg)
+    if not (np.isfinite(margin) and margin >= 0):
+        raise ValueError(f"margin must be a non-negative number of pixels, got {margin!r}")
+    return 2 * int(math.ceil(ray_reach_px(cfg, zernike, mask) + margin)) + 1
+
+
 def _psf_bank(cfg: SystemConfig, zernike, amplitude, device, psf_kw) -> np.ndarray:
     from metasensor.optics.psf import view_psfs
 
@@ -95,7 +140,10 @@ def geometric_psfs(ideal: np.ndarray, shifts: np.ndarray) -> np.ndarray:
 def block_psfs(cfg: SystemConfig, result: DaoResult, amplitude=None, device=None,
                **psf_kw) -> np.ndarray:
     """The PSF bank to reconstruct a block with after DAO: wave → ``view_psfs`` of the estimate;
-    geometric → the ideal bank translated by the estimated view shifts (never reshaped)."""
+    geometric → the ideal bank translated by the estimated view shifts (never reshaped).
+    The window is ``result.psf_size`` unless ``psf_kw`` gives ``size``."""
+    if result.psf_size is not None:
+        psf_kw.setdefault("size", result.psf_size)
     if result.method == "geometric":
         return geometric_psfs(_psf_bank(cfg, None, amplitude, device, psf_kw), result.shifts)
     return _psf_bank(cfg, result.zernike, amplitude, device, psf_kw)
@@ -125,19 +173,35 @@ def _upsample(views: torch.Tensor, d: int) -> torch.Tensor:
 
 
 class _Block:
-    """Geometry and data of one block: up-sampled views, their FFT padding, the PSF spectra."""
+    """Geometry and data of one block: up-sampled views, their FFT padding, the PSF spectra.
+
+    Memory: the up-sampled views and the PSF spectra of all views are kept when they fit in
+    ``cache_bytes`` (default 1 GiB); otherwise (large blocks, e.g. 2,000² px × 113 views) they
+    are recomputed per chunk of views (one bicubic up-sampling and one FFT per view more per
+    pass), and the chunk is reduced so that the deconvolution's ~12 grid-sized work arrays per
+    view stay within the same budget."""
 
     def __init__(self, views: torch.Tensor, cfg: SystemConfig, used: np.ndarray, lam: float,
-                 chunk: int):
+                 chunk: int, cache_bytes: int = 1 << 30):
         self.cfg = cfg
         self.d = cfg.scan_step_px
         self.used = used
         self.views = views  # (B, h, w) scan-step grid, used views only
         self.scale = float(views.abs().max().clamp(min=1e-30))
-        self.up = _upsample(views / self.scale, self.d)  # (B, H, W)
+        self.hw = (views.shape[-2] * self.d, views.shape[-1] * self.d)
         self.lam = lam
-        self.chunk = chunk
+        self.chunk0 = max(int(chunk), 1)
+        self.cache_bytes = int(cache_bytes)
         self.betas = beta_schedule()
+        self._up = None
+
+    def _up_chunk(self, b: slice) -> torch.Tensor:
+        if self._up is not None:
+            return self._up[b]
+        return _upsample(self.views[b] / self.scale, self.d)
+
+    def _otf_chunk(self, b: slice) -> torch.Tensor:
+        return self.otf[b] if self.otf is not None else psf2otf(self.kernels[b], self.shape)
 
     def set_psfs(self, bank: np.ndarray) -> None:
         n = self.cfg.nnum
@@ -148,21 +212,29 @@ class _Block:
         self.kernels = h / self.energy[:, None, None]
         k = h.shape[-1]
         self.pad = k // 2 + 4
-        hh, ww = self.up.shape[-2:]
+        hh, ww = self.hw
         self.shape = (hh + 2 * self.pad, ww + 2 * self.pad)
-        self.otf = psf2otf(self.kernels, self.shape)
+        nv, grid = self.views.shape[0], self.shape[0] * self.shape[1]
+        cached = nv * (hh * ww * 4 + grid * 4) <= self.cache_bytes  # views + half spectra
+        self.chunk = max(1, min(self.chunk0, self.cache_bytes // (12 * 4 * grid)))
+        if cached and self._up is None:
+            self._up = _upsample(self.views / self.scale, self.d)
+        elif not cached:
+            self._up = None
+        self.otf = psf2otf(self.kernels, self.shape) if cached else None
 
     def estimate(self, shifts_px: torch.Tensor) -> torch.Tensor:
         """I = Σ_uv e_uv Deconv(V_uv(p + s_uv), Ĥ_uv) / Σ e_uv on the pixel grid (H, W)."""
         p = self.pad
-        hh, ww = self.up.shape[-2:]
-        acc = torch.zeros((hh, ww), device=self.up.device, dtype=self.up.dtype)
-        for a in range(0, self.up.shape[0], self.chunk):
+        hh, ww = self.hw
+        acc = torch.zeros((hh, ww), device=self.views.device, dtype=self.views.dtype)
+        for a in range(0, self.views.shape[0], self.chunk):
             b = slice(a, a + self.chunk)
-            y = pad_fade(self.up[b], p)
+            y = pad_fade(self._up_chunk(b), p)
             if shifts_px is not None:
                 y = fourier_shift(y, -shifts_px[b])
-            x = kf_deconv(y, self.otf[b], lam=self.lam, betas=self.betas)[:, p:p + hh, p:p + ww]
+            x = kf_deconv(y, self._otf_chunk(b), lam=self.lam,
+                          betas=self.betas)[:, p:p + hh, p:p + ww]
             acc += (x * self.energy[b, None, None]).sum(0)
         # each deconvolved view estimates I (kernels have unit sum, views carry e_uv·I)
         return (acc / self.energy.sum()).clamp(min=0)
@@ -173,9 +245,10 @@ class _Block:
         hh, ww = image.shape
         spec = torch.fft.rfft2(pad_fade(image[None], p))
         out = []
-        for a in range(0, self.otf.shape[0], self.chunk):
+        for a in range(0, self.views.shape[0], self.chunk):
             b = slice(a, a + self.chunk)
-            conv = torch.fft.irfft2(spec * self.otf[b], s=self.shape)[:, p:p + hh, p:p + ww]
+            conv = torch.fft.irfft2(spec * self._otf_chunk(b), s=self.shape)[:, p:p + hh,
+                                                                               p:p + ww]
             out.append(conv[:, d // 2::d, d // 2::d] * self.energy[b, None, None])
         return torch.cat(out)
 
@@ -199,6 +272,7 @@ def run_dao(block_views, cfg: SystemConfig, method: str = "wave", init=None, dev
             amplitude=None, max_iter: int = 5, inner: int = 3, tol: float = 0.1,
             lam: float = DEFAULT_LAMBDA, max_shift_px: float = 50.0, modes=DAO_MODES,
             view_mask=None, chunk: int = 16, psf_kw: dict | None = None,
+            psf_size: int | str | None = "auto", clipped_views: str = "drop",
             progress: bool = False) -> DaoResult:
     """Wavefront estimation in one block (module docstring); returns a :class:`DaoResult`.
 
@@ -208,6 +282,12 @@ def run_dao(block_views, cfg: SystemConfig, method: str = "wave", init=None, dev
     init : initial Noll vector (waves), e.g. the local system aberration; None = 0.
     amplitude : (nnum, nnum) pupil amplitude (:mod:`metasensor.recon.pupil_estimate`) or None.
     psf_kw : extra keyword arguments for ``view_psfs`` (e.g. ``{"cache": False}``).
+    psf_size : PSF window K: "auto" (default) :func:`psf_window` of the current estimate over
+        the used views, recomputed at every update (geometric: of the ideal bank, then padded by
+        the shifts); None: ``view_psfs``' default (99.5 % of all views' light, several times
+        larger and slower); or an odd int. ``psf_kw["size"]`` overrides it.
+    clipped_views : views whose shift reached ±``max_shift_px``: "drop" them from the fit, or
+        "keep" them at the clipped value (the authors' clipping; a damped update).
     """
     if method not in ("wave", "geometric"):
         raise ValueError(f"method must be 'wave' or 'geometric', got {method!r}")
@@ -221,6 +301,11 @@ def run_dao(block_views, cfg: SystemConfig, method: str = "wave", init=None, dev
         raise ValueError("block_views contain NaN or infinite values")
     if max_iter < 1 or inner < 1:
         raise ValueError(f"max_iter and inner must be >= 1, got {max_iter}, {inner}")
+    if clipped_views not in ("drop", "keep"):
+        raise ValueError(f"clipped_views must be 'drop' or 'keep', got {clipped_views!r}")
+    if not (psf_size is None or psf_size == "auto"
+            or (isinstance(psf_size, int | np.integer) and psf_size > 0 and psf_size % 2)):
+        raise ValueError(f"psf_size must be 'auto', None or a positive odd int, got {psf_size!r}")
     phi = np.zeros(JMAX)
     if init is not None:
         z0 = np.asarray(init, dtype=np.float64).ravel()
@@ -241,17 +326,29 @@ def run_dao(block_views, cfg: SystemConfig, method: str = "wave", init=None, dev
     views = as_tensor(v.reshape(n * n, *v.shape[2:])[used.ravel()], dev)
     blk = _Block(views, cfg, used, lam, chunk)
 
-    ideal = _psf_bank(cfg, None, amplitude, device, psf_kw) if method == "geometric" else None
+    def size_for(phi_):
+        if psf_kw and "size" in psf_kw:
+            return psf_kw["size"]
+        if psf_size == "auto":
+            return psf_window(cfg, phi_ if method == "wave" else None, used)
+        return None if psf_size is None else int(psf_size)
+
+    def kw_for(phi_):
+        return {**(psf_kw or {}), "size": size_for(phi_)}
+
+    ideal = _psf_bank(cfg, None, amplitude, device, kw_for(None)) if method == "geometric" \
+        else None
     # geometric: accumulated absolute view shifts (pixels), starting from those of init
     total = np.where(used[..., None], gradient_shifts(phi, matrix), 0.0)
 
     def bank_for(phi_):
         if method == "wave":
-            return _psf_bank(cfg, phi_, amplitude, device, psf_kw)
+            return _psf_bank(cfg, phi_, amplitude, device, kw_for(phi_))
         return geometric_psfs(ideal, total)
 
     history: list[float] = []
     fits: list[float] = []
+    estimates: list[np.ndarray] = []
     s_full = np.zeros((n, n, 2))
     image = None
     from tqdm.auto import tqdm
@@ -266,12 +363,15 @@ def run_dao(block_views, cfg: SystemConfig, method: str = "wave", init=None, dev
         s_full = np.full((n, n, 2), np.nan)
         s_full[used] = to_numpy(s)
         clipped = np.abs(s_full).max(axis=-1) >= max_shift_px - 1e-6
+        if clipped_views == "keep":
+            clipped[:] = False
         fit = fit_shifts(np.nan_to_num(s_full), cfg, mask=used & ~clipped, modes=modes,
                          jmax=JMAX, matrix=matrix)
         dz = fit.zernike
         fits.append(fit.residual_rms)
         history.append(zernike_rms(dz, modes))
         phi = phi + dz
+        estimates.append(phi.copy())
         if method == "geometric":
             total = total + np.where(used[..., None], np.nan_to_num(s_full) - fit.tilt, 0.0)
         bar.update(1)
@@ -281,7 +381,7 @@ def run_dao(block_views, cfg: SystemConfig, method: str = "wave", init=None, dev
     return DaoResult(zernike=phi, history=history,
                      shifts=total if method == "geometric" else np.nan_to_num(s_full),
                      method=method, image=None if image is None else to_numpy(image) * blk.scale,
-                     fits=fits)
+                     fits=fits, psf_size=size_for(phi), estimates=estimates)
 
 
 def estimate_block_aberration(block_views, cfg: SystemConfig, method: str = "wave", init=None,
