@@ -20,8 +20,9 @@ reach over the 113 used views (:func:`metasensor.recon.dao.psf_window`): the rec
 window ``SIM_EXTRA`` pixels wider on each side, so the data hold light the models drop, up to
 ``SIM_MAX`` = 401 px (memory): at 3 λ (reach ≈ 160-190 px) the simulation window is then the
 ray reach + 10-20 px, and the data lack the far diffraction tails of the most tilted views.
-Full mode: two scenes of 150 × 150 pixels (10 × 10 lenslets), three draws per level, wave and
-geometric DAO with at most 3 updates (8 at 3 λ).
+Full mode: two scenes of 150 × 150 pixels (10 × 10 lenslets; 240 × 240 at 3 λ, ``BIG_BLOCK``),
+three draws per level, wave and geometric DAO with at most 3 updates (8 at 3 λ).
+``ED_FIG4_LEVELS=0.5,1`` runs a subset of the levels.
 """
 
 from __future__ import annotations
@@ -38,6 +39,7 @@ sys.path.insert(0, str(HERE.parent / "src"))
 
 LEVELS = (0.5, 1.0, 3.0)
 SIM_EXTRA = 20  # pixels per side the simulation's PSF window exceeds the reconstructions'
+BIG_BLOCK = 240  # scene size (px) at 3 λ
 SIM_MAX = 401  # largest simulation window: its 3×-subsampled bank peaks at ~6 GB of memory
 
 
@@ -191,6 +193,8 @@ def run(quick: bool = False) -> list[dict]:
         scenes, levels, draws, size = ("camera",), (0.5,), (0,), 120
     else:
         scenes, levels, draws, size = ("camera", "astronaut"), LEVELS, (0, 1, 2), 150
+    # 3 λ: rays reach 110-190 px, more than a 150-px block (measured: wave DAO diverged there,
+    # residual 3.5 λ); a 240-px block converged (0.18 λ after 4 updates, tests/recon/test_dao.py)
     env = os.environ.get("ED_FIG4_LEVELS")  # e.g. "0.5,1": a subset of the levels
     if env:
         levels = tuple(float(v) for v in env.split(","))
@@ -216,12 +220,13 @@ def run(quick: bool = False) -> list[dict]:
     kern.fine_widefield = coarse_fine_widefield(original)
     try:
         for s, v, d in tqdm(cases, desc="ED Fig. 4"):
-            if (s, v, d, size) in done:
-                rows += done[s, v, d, size]
+            px = BIG_BLOCK if (v >= 3 and not quick) else size
+            if (s, v, d, px) in done:
+                rows += done[s, v, d, px]
                 continue
-            new = one_case(s, v, d, size, (8 if v >= 3 else 3) if not quick else 2)
+            new = one_case(s, v, d, px, (8 if v >= 3 else 3) if not quick else 2)
             for r in new:
-                r["size"] = size
+                r["size"] = px
             done_file.parent.mkdir(parents=True, exist_ok=True)
             with done_file.open("a") as f:
                 f.writelines(json.dumps(r) + "\n" for r in new)

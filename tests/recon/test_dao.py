@@ -135,9 +135,17 @@ def test_wave_dao_one_wave_within_three_updates(seed):
 
 @pytest.mark.slow
 def test_wave_dao_three_waves():
-    # acceptance: residual ≤ 0.3 λ for a 3 λ random aberration
-    resid, _ = _residual_case(3.0, 30, 3, max_iter=8)
-    assert resid <= 0.3
+    # acceptance: residual ≤ 0.3 λ for a 3 λ random aberration. The data's bank is 80 px wider
+    # than the DAO window (view_psfs' default window is ~900 px at 3 λ: several GB).
+    # Measured: 1.407, 0.818, 0.281, 0.184 λ after updates 1-4 (240-px block, rays reach ~106 px)
+    from metasensor.recon.dao import psf_window
+
+    z = random_zernike(3.0, seed=3)
+    k = psf_window(CFG, z) + 80
+    bank = ms.view_psfs(CFG, z, size=k)
+    views, _ = synth_views(CFG, _scene(240 + k, 1), bank, 30, 3)
+    res = run_dao(views, CFG, method="wave", max_iter=4, tol=0.0)
+    assert zernike_rms(res.zernike - z) <= 0.3
 
 
 @pytest.mark.slow
@@ -196,8 +204,6 @@ def test_ray_reach_tilt_and_defocus_analytic():
         ray_reach_px(CFG, [0.0, np.nan])
     with pytest.raises(ValueError, match="psf_size"):
         run_dao(np.ones((15, 15, 20, 20)), CFG, psf_size=40)
-    with pytest.raises(ValueError, match="clipped_views"):
-        run_dao(np.ones((15, 15, 20, 20)), CFG, clipped_views="maybe")
 
 
 @pytest.mark.slow

@@ -272,8 +272,7 @@ def run_dao(block_views, cfg: SystemConfig, method: str = "wave", init=None, dev
             amplitude=None, max_iter: int = 5, inner: int = 3, tol: float = 0.1,
             lam: float = DEFAULT_LAMBDA, max_shift_px: float = 50.0, modes=DAO_MODES,
             view_mask=None, chunk: int = 16, psf_kw: dict | None = None,
-            psf_size: int | str | None = "auto", clipped_views: str = "drop",
-            progress: bool = False) -> DaoResult:
+            psf_size: int | str | None = "auto", progress: bool = False) -> DaoResult:
     """Wavefront estimation in one block (module docstring); returns a :class:`DaoResult`.
 
     block_views : (nnum, nnum, h, w) the block's views (scan-step grid, any intensity scale).
@@ -286,8 +285,6 @@ def run_dao(block_views, cfg: SystemConfig, method: str = "wave", init=None, dev
         the used views, recomputed at every update (geometric: of the ideal bank, then padded by
         the shifts); None: ``view_psfs``' default (99.5 % of all views' light, several times
         larger and slower); or an odd int. ``psf_kw["size"]`` overrides it.
-    clipped_views : views whose shift reached ±``max_shift_px``: "drop" them from the fit, or
-        "keep" them at the clipped value (the authors' clipping; a damped update).
     """
     if method not in ("wave", "geometric"):
         raise ValueError(f"method must be 'wave' or 'geometric', got {method!r}")
@@ -301,8 +298,6 @@ def run_dao(block_views, cfg: SystemConfig, method: str = "wave", init=None, dev
         raise ValueError("block_views contain NaN or infinite values")
     if max_iter < 1 or inner < 1:
         raise ValueError(f"max_iter and inner must be >= 1, got {max_iter}, {inner}")
-    if clipped_views not in ("drop", "keep"):
-        raise ValueError(f"clipped_views must be 'drop' or 'keep', got {clipped_views!r}")
     if not (psf_size is None or psf_size == "auto"
             or (isinstance(psf_size, int | np.integer) and psf_size > 0 and psf_size % 2)):
         raise ValueError(f"psf_size must be 'auto', None or a positive odd int, got {psf_size!r}")
@@ -363,8 +358,6 @@ def run_dao(block_views, cfg: SystemConfig, method: str = "wave", init=None, dev
         s_full = np.full((n, n, 2), np.nan)
         s_full[used] = to_numpy(s)
         clipped = np.abs(s_full).max(axis=-1) >= max_shift_px - 1e-6
-        if clipped_views == "keep":
-            clipped[:] = False
         fit = fit_shifts(np.nan_to_num(s_full), cfg, mask=used & ~clipped, modes=modes,
                          jmax=JMAX, matrix=matrix)
         dz = fit.zernike
