@@ -111,3 +111,29 @@ def test_bad_input(capture, bank):
     with pytest.raises(ValueError, match="scheduler"):
         reconstruct(views, CFG, psf=bank, iterations=1, scheduler="bogus")
     assert np.isfinite(views).all()  # inputs untouched
+
+
+def test_wave_dao_bank_uses_the_used_views_window(capture, bank, monkeypatch):
+    # After wave DAO (no psf / psf_fn given) the block's bank is generated at
+    # recon.dao.psf_window of the estimate, not view_psfs' all-views default window.
+    import metasensor.recon.api as api
+    from metasensor.recon import dao as real_dao
+
+    views, _ = capture
+    z = np.zeros(45)
+    z[4] = 0.5
+
+    def estimate_block_aberration(window, cfg, method, init, device, **kw):
+        return z, [1.0]
+
+    monkeypatch.setitem(sys.modules, "metasensor.recon.dao", types.SimpleNamespace(
+        estimate_block_aberration=estimate_block_aberration, psf_window=real_dao.psf_window))
+    sizes = []
+
+    def default_psfs(cfg, zernike, device, size=None):
+        sizes.append(size)
+        return bank
+
+    monkeypatch.setattr(api, "_default_psfs", default_psfs)
+    reconstruct(views, CFG, method="wave", iterations=1, scheduler="sync")
+    assert sizes == [real_dao.psf_window(CFG, z)]
