@@ -9,8 +9,8 @@ exactly in the Fourier domain.
   (the aliasing sum over the d x d sub-bands: sampling every d-th pixel) to the small spectrum of
   the sampled view, and inverse-transform at the small size;
 - adjoint: small FFT of the view-domain array, *tile* its spectrum d x d times (the spectrum of the
-  zero-filled up-sampled array), multiply by the conjugate OTF, accumulate over views, and do one
-  inverse real FFT at full size.
+  zero-filled up-sampled array), multiply by the conjugate OTF, accumulate over views
+  (:meth:`PhaseSpaceOperator.backproject_conj`), and do one inverse real FFT at full size.
 
 Geometry. The estimate lives on a padded *domain* of ``(Ny, Nx) = (My·d, Mx·d)`` pixels whose
 view samples sit exactly at multiples of d (sample (m, n) at domain pixel (m·d, n·d)); this makes
@@ -185,17 +185,6 @@ class PhaseSpaceOperator:
         rows = torch.fft.ifft(folded, dim=-2)  # the sampled rows' half spectra along x
         full = torch.fft.irfft(rows, n=nx, dim=-1)
         return full[..., ::d] / d
-
-    def backproject_spectrum(self, samples: torch.Tensor, views: slice | torch.Tensor,
-                             out: torch.Tensor | None = None) -> torch.Tensor:
-        """Accumulate Σ_views conj(OTF)·spectrum(S_dᵀ samples) into a half spectrum (Ny, Nh)."""
-        ny, _ = self.geometry.domain
-        acc = self.backproject_conj(samples, views)
-        acc = acc.conj().reshape(ny, -1)
-        if out is None:
-            return acc.resolve_conj()
-        out += acc
-        return out
 
     def new_conj_accumulator(self) -> torch.Tensor:
         """Zeroed (d, My, Nx//2+1) accumulator for :meth:`backproject_conj`."""
