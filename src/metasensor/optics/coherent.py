@@ -30,7 +30,8 @@ import torch
 from metasensor.config import SystemConfig
 from metasensor.optics.pupil import disk_fraction, pupil_amplitude, pupil_grid, pupil_phase
 
-__all__ = ["FieldPlan", "plan_field", "pupil_samples", "point_field", "next_fast_odd"]
+__all__ = ["FieldPlan", "plan_field", "pupil_samples", "point_field", "binned_intensity_mft",
+           "next_fast_odd"]
 
 MIN_PUPIL_RADIUS = 96.0
 
@@ -57,8 +58,10 @@ class FieldPlan:
     pupil_n: int
 
 
-def plan_field(cfg: SystemConfig, n: int, dx: float, grad_max: float) -> FieldPlan:
-    """Choose FFT or MFT for an ``n × n`` output grid of pitch ``dx`` [m] (odd n)."""
+def plan_field(cfg: SystemConfig, n: int, dx: float, grad_max: float,
+               method: str | None = None) -> FieldPlan:
+    """Choose FFT or MFT for an ``n × n`` output grid of pitch ``dx`` [m] (odd n); ``method``
+    ("fft"/"mft") forces one."""
     scale = cfg.na / cfg.wavelength * dx  # pupil radius [samples] per FFT sample
     r_min = max(MIN_PUPIL_RADIUS, 2.2 * grad_max + 8.0)
     n_fft = next_fast_odd(max(n, math.ceil(r_min / scale)))
@@ -66,7 +69,9 @@ def plan_field(cfg: SystemConfig, n: int, dx: float, grad_max: float) -> FieldPl
     m_mft = 2 * math.ceil(r_mft) + 3
     cost_fft = 2.0 * n_fft**2 * math.log2(n_fft)
     cost_mft = float(m_mft) * n * (m_mft + n)
-    if cost_mft < cost_fft:
+    if method not in (None, "fft", "mft"):
+        raise ValueError(f"method must be 'fft', 'mft' or None, got {method!r}")
+    if method == "mft" or (method is None and cost_mft < cost_fft):
         return FieldPlan("mft", r_mft, m_mft)
     return FieldPlan("fft", n_fft * scale, n_fft)
 
@@ -112,3 +117,33 @@ def point_field(cfg: SystemConfig, plan: FieldPlan, a: np.ndarray, w: np.ndarray
     u = e @ p @ e.T  # rows y, columns x
     u *= df * dx / math.sqrt(norm)
     return u.to(dtype)
+
+
+def binned_intensity_mft(cfg: SystemConfig, plan: FieldPlan, a: np.ndarray, w: np.ndarray,
+                         norm: float, n: int, dx: float, k: int, device,
+                         rows: int = 1024) -> torch.Tensor:
+    """|field|² of a unit point on the ``n × n`` grid (as :func:`point_field` with an MFT plan),
+    summed over k x k cells: (n // k, n // k) float64. The field is formed ``rows`` output rows
+    (rounded to a multiple of k) at a time, so memory stays O(n·pupil_n) instead of O(n²): the
+    widefield PSF of a strongly aberrated lens needs grids of ~20,000² (6 GB per complex array)."""
+    if plan.method != "mft":
+        raise ValueError("binned_intensity_mft needs an MFT plan (plan_field(..., method='mft'))")
+    if n % k:
+        raise ValueError(f"grid size {n} is not a multiple of the bin {k}")
+    p = torch.polar(torch.as_tensor(a, dtype=torch.float64),
+                    torch.as_tensor(2 * np.pi * w, dtype=torch.float64)).to(device)
+    m = plan.pupil_n
+    df = cfg.na / cfg.wavelength / plan.radius
+    f = (np.arange(m) - m // 2) * df
+    x = (np.arange(n) - n // 2) * dx
+    e = torch.as_tensor(np.exp(-2j * np.pi * np.outer(x, f)), dtype=torch.complex128,
+                        device=device)
+    pe = (p @ e.T) * (df * dx / math.sqrt(norm))  # (m, n): pupil rows, image columns
+    step = max(k, (int(rows) // k) * k)
+    out = torch.empty((n // k, n // k), dtype=torch.float64, device=device)
+    for r0 in range(0, n, step):
+        u = e[r0:r0 + step] @ pe
+        inten = (u.real.square() + u.imag.square())
+        h = inten.shape[0] // k
+        out[r0 // k:r0 // k + h] = inten.reshape(h, k, n // k, k).sum(dim=(1, 3))
+    return out

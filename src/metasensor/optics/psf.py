@@ -40,13 +40,22 @@ import torch
 from metasensor.backend import resolve_device
 from metasensor.config import SystemConfig
 from metasensor.optics import cache as _cache
-from metasensor.optics.coherent import next_fast_odd, plan_field, point_field, pupil_samples
+from metasensor.optics.coherent import (
+    binned_intensity_mft,
+    next_fast_odd,
+    plan_field,
+    point_field,
+    pupil_samples,
+)
 from metasensor.optics.pupil import disk_fraction, pupil_amplitude, pupil_phase
 
 __all__ = ["view_psfs", "widefield_psf", "PSF_CODE_VERSION", "ENERGY_CUT"]
 
 PSF_CODE_VERSION = "psf-1"
 ENERGY_CUT = 0.005  # default windows keep >= 99.5 % of the energy
+# widefield fields above this many bytes (complex128) are formed by row-chunked MFT instead
+# (a 3-wave lens needs ~20,000² samples: 6 GB per array by FFT)
+WIDEFIELD_FFT_BYTES = 1 << 30
 
 PupilFn = Callable[[np.ndarray, np.ndarray], np.ndarray]
 
@@ -380,7 +389,12 @@ def _widefield_pixels(cfg, z, depth, phase, amplitude, sampling, npix, gmax, dev
     dx = sampling / os_
     n = npix * os_
     plan = plan_field(cfg, n, dx, gmax)
+    if plan.method == "fft" and plan.pupil_n**2 * 16 > WIDEFIELD_FFT_BYTES:
+        plan = plan_field(cfg, n, dx, gmax, method="mft")  # row-chunked: bounded memory
     a, w, norm = pupil_samples(cfg, plan, z, depth, phase, amplitude)
+    if plan.method == "mft" and n * n * 16 > WIDEFIELD_FFT_BYTES:
+        pix = binned_intensity_mft(cfg, plan, a, w, norm, n, dx, os_, dev).cpu().numpy()
+        return pix, float(np.sum(a**2) / norm)
     u0 = point_field(cfg, plan, a, w, norm, n, dx, dev, dtype=torch.complex128)
     pix = _bin(u0.real.square() + u0.imag.square(), os_).cpu().numpy()
     return pix, float(np.sum(a**2) / norm)
