@@ -137,13 +137,11 @@ def one_case(scene_name: str, rms: float, draw: int, size: int, max_iter: int) -
 
 
 def figure(rows: list[dict], path: Path) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from metasensor.report.figures import new_figure, save_figure
 
     modes = list(dict.fromkeys(r["mode"] for r in rows))
-    fig, axes = plt.subplots(1, 2, figsize=(10, 4))
+    fig, axes = new_figure(1, 2, size=(10, 4))
+    axes = axes[0]
     for ax, key in zip(axes, ("psnr", "ssim"), strict=True):
         for m in modes:
             lv = sorted({r["rms"] for r in rows if r["mode"] == m})
@@ -156,10 +154,7 @@ def figure(rows: list[dict], path: Path) -> None:
         ax.grid(alpha=0.3)
     axes[0].legend(fontsize=8)
     fig.suptitle("Extended Data Fig. 4: DAO vs aberration level (SNR 30 dB)")
-    fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    save_figure(fig, path, dpi=120)
 
 
 def summary(rows: list[dict]) -> list[dict]:

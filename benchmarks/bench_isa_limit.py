@@ -112,14 +112,10 @@ def run(quick: bool = False) -> list[dict]:
 
 
 def _plot(rows: list[dict], path: Path) -> None:
-    import matplotlib
+    from metasensor.report.figures import new_figure, save_figure
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from metasensor.io.atomic import atomic_path
-
-    fig, ax = plt.subplots(figsize=(5.5, 3.8), constrained_layout=True)
+    fig, axes = new_figure(size=(5.5, 3.8))
+    ax = axes[0, 0]
     q = [r for r in rows if r["study"] == "ssim_vs_snr"]
     for scene in dict.fromkeys(r["scene"] for r in q):
         sel = [r for r in q if r["scene"] == scene]
@@ -131,10 +127,7 @@ def _plot(rows: list[dict], path: Path) -> None:
     ax.set_ylabel("SSIM to truth")
     ax.set_title("Information limit of a 5x5 scan (aberration-free)")
     ax.legend(fontsize=7)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=120)
-    plt.close(fig)
+    save_figure(fig, path, dpi=120)
 
 
 if __name__ == "__main__":

@@ -91,14 +91,10 @@ def run(quick: bool = False) -> list[dict]:
 
 
 def _plot(rows: list[dict], path: Path) -> None:
-    import matplotlib
+    from metasensor.report.figures import new_figure, save_figure
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from metasensor.io.atomic import atomic_path
-
-    fig, ax = plt.subplots(figsize=(5, 3.6), constrained_layout=True)
+    fig, axes = new_figure(size=(5, 3.6))
+    ax = axes[0, 0]
     for budget, scene in dict.fromkeys((r["budget"], r["scene"]) for r in rows):
         sel = [r for r in rows if r["scene"] == scene and r["budget"] == budget]
         ax.plot([r["scan"] for r in sel], [r["ssim"] for r in sel],
@@ -109,10 +105,7 @@ def _plot(rows: list[dict], path: Path) -> None:
     ax.set_ylabel("SSIM to truth")
     ax.set_title("ISA quality vs scan period (30 dB per frame / equal light)")
     ax.legend()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=120)
-    plt.close(fig)
+    save_figure(fig, path, dpi=120)
 
 
 if __name__ == "__main__":

@@ -100,3 +100,10 @@ def test_weights_and_bad_input(five):
                  torch.ones(op.geometry.grid, dtype=torch.bool), 0.0)
     with pytest.raises(ValueError, match="psf must be the operator's bank"):
         FoldedNormal(op, np.zeros((3, 5, 5), np.float32))
+
+
+def test_mask_shape_is_checked(five):
+    op, nm = five
+    with pytest.raises(ValueError, match="mask must have shape"):
+        tikhonov(nm, torch.zeros(op.n_views, *op.geometry.grid), torch.ones(3, 3, dtype=torch.bool),
+                 1e-3)

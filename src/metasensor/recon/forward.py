@@ -224,6 +224,18 @@ class PhaseSpaceOperator:
         for i in range(0, len(views), self.chunk):
             yield views[i:i + self.chunk]
 
+    def samples_and_mask(self, data, mask) -> tuple[torch.Tensor, torch.Tensor]:
+        """``data`` (V, My, Mx) as float32 and ``mask`` (My, Mx) as bool on the device, checked
+        against the operator's views and sample grid (one-line errors)."""
+        y = torch.as_tensor(data, dtype=torch.float32, device=self.device)
+        m = torch.as_tensor(mask, dtype=torch.bool, device=self.device)
+        if tuple(y.shape) != (self.n_views, *self.geometry.grid):
+            raise ValueError(f"data must have shape {(self.n_views, *self.geometry.grid)}, "
+                             f"got {tuple(y.shape)}")
+        if tuple(m.shape) != self.geometry.grid:
+            raise ValueError(f"mask must have shape {self.geometry.grid}, got {tuple(m.shape)}")
+        return y, m
+
     # ------------------------------------------------------------------ the operator
     def forward(self, image, views=None) -> torch.Tensor:
         """A·image: (Ny, Nx) domain image -> (V, My, Mx) view samples (views: index tensor)."""

@@ -111,11 +111,7 @@ def richardson_lucy(op: PhaseSpaceOperator, data: torch.Tensor, mask: torch.Tens
     Residual history: for subsets > 1 each subset's residual is taken before its own update.
     """
     dev = op.device
-    data = torch.as_tensor(data, dtype=torch.float32, device=dev)
-    mask_t = torch.as_tensor(mask, dtype=torch.bool, device=dev)
-    if tuple(data.shape) != (op.n_views, *op.geometry.grid):
-        raise ValueError(f"data must have shape {(op.n_views, *op.geometry.grid)}, "
-                         f"got {tuple(data.shape)}")
+    data, mask_t = op.samples_and_mask(data, mask)
     if iterations < 0:
         raise ValueError(f"iterations must be >= 0, got {iterations}")
     maskf = mask_t.to(torch.float32)

@@ -86,27 +86,33 @@ class FoldedNormal:
         of the measurement, in the units of op: divide by their maximum for a relative scale)."""
         return torch.linalg.eigvalsh(self.matrix)
 
-    def solve(self, rhs_image, lam: float, weights: torch.Tensor | None = None) -> torch.Tensor:
-        """(AᵀA + lam·R)⁻¹ rhs on the circular domain; R = diag(``weights``) (My, Mx, d²) in the
-        folded layout (default: the identity). ``lam`` is relative to G's largest diagonal."""
+    def factor(self, lam: float, weights: torch.Tensor | None = None) -> torch.Tensor:
+        """Cholesky factors (My, Mx, d², d²) of G + lam·R, R = diag(``weights``) (My, Mx, d²) in
+        the folded layout (default: the identity); ``lam`` is relative to G's largest diagonal.
+        Double precision: G's eigenvalues span ~1e-6..1 (float32 would lose the small ones);
+        batched complex64 LU also hit an MKL argument error for d = 15 (scan 1)."""
+        if not lam > 0:
+            raise ValueError(f"lam must be > 0, got {lam}")
         scale = float(self.matrix.diagonal(dim1=-2, dim2=-1).real.max())
         w = torch.ones(self.matrix.shape[:-1], device=self.device) if weights is None else weights
-        # Cholesky in double precision: G's eigenvalues span ~1e-6..1 (float32 would lose the
-        # small ones); batched complex64 LU also hit an MKL argument error for d = 15 (scan 1).
         a = self.matrix.to(torch.complex128)
         a = a + (lam * scale) * torch.diag_embed(w.to(torch.complex128))
-        b = self.fold(torch.fft.fft2(torch.as_tensor(rhs_image, dtype=torch.float32,
-                                                     device=self.device)))
         chol, info = torch.linalg.cholesky_ex(a)
         if bool((info != 0).any()):
             raise ValueError(f"lam = {lam} is too small to make AᵀA + lam·R positive definite")
+        return chol
+
+    def solve(self, rhs_image, chol: torch.Tensor) -> torch.Tensor:
+        """(AᵀA + lam·R)⁻¹ rhs on the circular domain, with ``chol`` from :meth:`factor`."""
+        b = self.fold(torch.fft.fft2(torch.as_tensor(rhs_image, dtype=torch.float32,
+                                                     device=self.device)))
         x = torch.cholesky_solve(b.to(torch.complex128).unsqueeze(-1), chol).squeeze(-1)
         return torch.fft.ifft2(self.unfold(x.to(torch.complex64))).real
 
 
 def difference_weights(normal: FoldedNormal, floor: float = 1e-3) -> torch.Tensor:
     """|D_y|² + |D_x|² (first differences, the discrete Laplacian's symbol) per alias, folded, plus
-    ``floor`` (keeps the mean determined): a smoothness regulariser R for :meth:`solve`."""
+    ``floor`` (keeps the mean determined): a smoothness regulariser R for :meth:`factor`."""
     ny, nx = normal.geometry.domain
     ky = torch.fft.fftfreq(ny, device=normal.device)[:, None]
     kx = torch.fft.fftfreq(nx, device=normal.device)[None, :]
@@ -124,20 +130,13 @@ def tikhonov(normal: FoldedNormal, data, mask, lam: float, smooth: bool = True,
     differences (``smooth``) or the identity. Returns the (Ny, Nx) domain estimate (not clipped).
     """
     op = normal.op
-    dev = normal.device
-    y = torch.as_tensor(data, dtype=torch.float32, device=dev)
-    m = torch.as_tensor(mask, dtype=torch.bool, device=dev)
-    if tuple(y.shape) != (op.n_views, *op.geometry.grid):
-        raise ValueError(f"data must have shape {(op.n_views, *op.geometry.grid)}, "
-                         f"got {tuple(y.shape)}")
-    if not lam > 0:
-        raise ValueError(f"lam must be > 0, got {lam}")
-    w = difference_weights(normal) if smooth else None
+    y, m = op.samples_and_mask(data, mask)
+    chol = normal.factor(lam, difference_weights(normal) if smooth else None)  # once
     mf = m.to(torch.float32)
     y = torch.nan_to_num(y) * mf
     steps = 1 if bool(m.all()) else max(int(outer), 1)
     x = None
     for _ in range(steps):
         full = y if x is None else y + op.forward(x) * (1 - mf)
-        x = normal.solve(op.adjoint(full), lam, w)
+        x = normal.solve(op.adjoint(full), chol)
     return x
