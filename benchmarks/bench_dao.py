@@ -2,10 +2,11 @@
 
 One iteration = Krishnan–Fergus deconvolution of every used view (113 for the prototype) on the
 pixel grid, their signal-weighted mean, the forward prediction of every view and the sub-pixel
-shift measurement (:class:`metasensor.recon.dao._Block`). PSF regeneration (``view_psfs``, the
-optics stage, once per three iterations) is timed separately. The FFT reference times the
-real FFTs of the same sizes and counts on the same device: per view 6 β steps × (2 forward +
-1 inverse) + 1 for the data, 1 inverse for the prediction, and the correlation's complex FFTs.
+shift measurement (:class:`metasensor.recon.dao_block.DaoBlock`). PSF regeneration
+(``view_psfs``, the optics stage, once per three iterations) is timed separately. The FFT
+reference times the real FFTs of the same sizes and counts on the same device: per view 6 β
+steps × (2 forward + 1 inverse) + 1 for the data, 1 inverse for the prediction, 1 inverse for
+the known-region weights of the prediction, and the correlation's complex FFTs.
 
 The PSFs are those of a 1 λ r.m.s. random aberration (modes 4–45, seed 0), on two windows: the
 DAO default (``psf_size="auto"``, :func:`metasensor.recon.dao.psf_window`: ray reach over the
@@ -43,6 +44,7 @@ def _fft_reference(n_views: int, grid: tuple[int, int], view: tuple[int, int], b
             x = torch.fft.irfft2(s + s2, s=grid)
         torch.fft.rfft2(x)  # data spectrum
         torch.fft.irfft2(torch.fft.rfft2(x), s=grid)  # prediction
+        torch.fft.irfft2(s, s=grid)  # known-region weights of the prediction
         for _ in range(3):  # correlation: two forward, one inverse complex FFT
             torch.fft.fft2(v)
     if device.type == "cuda":
@@ -54,7 +56,7 @@ def _iteration(cfg, bank, size: int, dev, rng) -> dict:
     import torch
     from scipy.ndimage import gaussian_filter
 
-    from metasensor.recon.dao import _Block
+    from metasensor.recon.dao_block import DaoBlock
     from metasensor.recon.fastdeconv import beta_schedule
 
     d = cfg.scan_step_px
@@ -64,7 +66,7 @@ def _iteration(cfg, bank, size: int, dev, rng) -> dict:
                       for _ in range(int(used.sum()))])
     tv = torch.as_tensor(views, device=dev)
     del views
-    blk = _Block(tv, cfg, used, 5e4, 16)
+    blk = DaoBlock(tv, cfg, used, 5e4, 16)
     t0 = time.perf_counter()
     blk.set_psfs(bank)
     shifts = torch.zeros((tv.shape[0], 2), device=dev)

@@ -177,6 +177,13 @@ def summary(rows: list[dict]) -> list[dict]:
         gap = mean[1.0, "oracle_isa"] - mean[1.0, "wave_dao"]
         out.append({"summary": "target wave within 1.5 dB of oracle at 1 λ", "value": gap,
                     "holds": bool(gap <= 1.5)})
+    for v, limit in ((1.0, 0.1), (3.0, 0.3)):  # issue 6: residual wavefront r.m.s.
+        res = [r["residual_rms"] for r in rows if r["rms"] == v and r["mode"] == "wave_dao"]
+        if res:
+            ok = sum(x <= limit for x in res)
+            out.append({"summary": f"target wave residual <= {limit} λ at {v:g} λ",
+                        "value": float(max(res)), "draws_within": f"{ok} of {len(res)}",
+                        "holds": bool(ok == len(res))})
     above = [mean[v, "wave_dao"] - mean[v, "2d_sensor"] for v in levels]
     out.append({"summary": "target wave above 2D sensor at every level", "value": min(above),
                 "holds": bool(min(above) > 0)})

@@ -9,12 +9,12 @@ from metasensor.config import SystemConfig
 from metasensor.optics.zernike import random_zernike
 from metasensor.recon.dao import (
     DaoResult,
-    _Block,
     block_psfs,
     estimate_block_aberration,
     geometric_psfs,
     run_dao,
 )
+from metasensor.recon.dao_block import DaoBlock
 from metasensor.recon.wavefront import zernike_rms
 
 CFG = SystemConfig()
@@ -80,7 +80,7 @@ def test_block_prediction_matches_forward_model():
     views, truth = synth_views(CFG, _scene(200), bank)
     used = CFG.view_mask()
     tv = torch.tensor(views[used])
-    blk = _Block(tv, CFG, used, 5e4, 16)
+    blk = DaoBlock(tv, CFG, used, 5e4, 16)
     blk.set_psfs(bank)
     pred = blk.predict(torch.tensor(truth) / blk.scale) * blk.scale
     m = 6
@@ -238,10 +238,28 @@ def test_block_memory_lean_path_matches_cached(rng):
     shifts = torch.tensor(rng.uniform(-2, 2, (views.shape[0], 2)), dtype=torch.float32)
     out = []
     for cache_bytes in (1 << 30, 0):
-        blk = _Block(views, CFG, used, 5e4, 1, cache_bytes=cache_bytes)
+        blk = DaoBlock(views, CFG, used, 5e4, 1, cache_bytes=cache_bytes)
         blk.set_psfs(bank)
         assert (blk.otf is None) == (cache_bytes == 0)
         img = blk.estimate(shifts)
         out.append((img, blk.predict(img)))
     for a, b in zip(out[0], out[1], strict=True):
         assert float((a - b).abs().max()) <= 1e-5 * float(a.abs().max())
+
+
+def test_block_inside_fractions(rng):
+    # the fraction of a view's predicted light from inside the block, for a kernel displaced by
+    # (0, +6) px: samples (1_block ⊛ H) in the left 6 columns draw from outside (0), the rest
+    # from inside (1). Exact to float32 rounding (1e-5).
+    k = 21
+    bank = np.zeros((15, 15, k, k), np.float32)
+    bank[..., k // 2, k // 2 + 6] = 1.0
+    used = CFG.view_mask()
+    views = torch.tensor(rng.random((int(used.sum()), 16, 16)), dtype=torch.float32)
+    blk = DaoBlock(views, CFG, used, 5e4, 8)
+    blk.set_psfs(bank)
+    pred = blk._inside(slice(0, 3))[0].numpy()
+    assert pred.shape == (48, 48)
+    assert np.abs(pred[:, :6]).max() < 1e-5 and np.abs(pred[:, 6:] - 1).max() < 1e-5
+    assert float(blk.reliability(torch.tensor(0.5))) == 0.0
+    assert float(blk.reliability(torch.tensor(1.0))) == 1.0

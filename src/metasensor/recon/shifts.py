@@ -90,16 +90,23 @@ def _quadratic_peak(c: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
     return dy, dx
 
 
+def _window(moving: torch.Tensor, window: float, weight: torch.Tensor | None) -> torch.Tensor:
+    """Tukey window (H, W), times the per-sample ``weight`` (B or 1, H, W) when given."""
+    win = tukey2d(moving.shape[-2:], window, device=moving.device, dtype=moving.dtype)
+    return win if weight is None else win * weight.to(moving.dtype)
+
+
 def _coarse_shifts(reference: torch.Tensor, moving: torch.Tensor, upsample: int, window: float,
-                   max_shift: float | None) -> torch.Tensor:
+                   max_shift: float | None, weight: torch.Tensor | None = None) -> torch.Tensor:
     """Peak of the windowed FFT cross-correlation, refined on an upsampled DFT grid. (B, 2)."""
     b, h, w = moving.shape
-    win = tukey2d((h, w), window, device=moving.device, dtype=moving.dtype)
+    win = _window(moving, window, weight)
+    wsum = win.sum(dim=(-2, -1), keepdim=True).clamp(min=1e-12)
 
     def prep(x):
-        x = x - x.mean(dim=(-2, -1), keepdim=True)
+        x = x - (x * win).sum(dim=(-2, -1), keepdim=True) / wsum
         x = x * win
-        return x - (x.sum(dim=(-2, -1), keepdim=True) / win.sum()) * win
+        return x - (x.sum(dim=(-2, -1), keepdim=True) / wsum) * win
 
     fm = torch.fft.fft2(prep(moving))
     fr = torch.fft.fft2(prep(reference))
@@ -150,12 +157,14 @@ def _warp(reference: torch.Tensor, shifts: torch.Tensor) -> tuple[torch.Tensor, 
 
 
 def _refine_shifts(reference: torch.Tensor, moving: torch.Tensor, shifts: torch.Tensor,
-                   window: float, iterations: int) -> torch.Tensor:
+                   window: float, iterations: int,
+                   weight: torch.Tensor | None = None) -> torch.Tensor:
     """Gauss–Newton on the weighted SSD  Σ_p w(p) (moving(p) − a·reference(p − s) − c)²  over
     (s, a, c) per image: unbiased where the coarse correlation peak is pulled by the image
-    borders. The weight is a Tukey window times the mask where the reference is defined."""
+    borders. The weight is a Tukey window times the mask where the reference is defined (times
+    ``weight`` when given)."""
     b = moving.shape[0]
-    win = tukey2d(moving.shape[-2:], window, device=moving.device, dtype=moving.dtype)
+    win = _window(moving, window, weight)
     s = shifts.clone()
     eye = 1e-9 * torch.eye(4, dtype=torch.float64, device=moving.device)
     for _ in range(iterations):
@@ -189,12 +198,14 @@ def _refine_shifts(reference: torch.Tensor, moving: torch.Tensor, shifts: torch.
 
 def measure_shifts_torch(reference: torch.Tensor, moving: torch.Tensor, upsample: int = 10,
                          window: float = 0.25, max_shift: float | None = None,
-                         refine: int = 4) -> torch.Tensor:
+                         refine: int = 4, weight: torch.Tensor | None = None) -> torch.Tensor:
     """Tensor core of :func:`measure_shifts`: ``reference`` (B or 1, H, W), ``moving`` (B, H, W)
-    → shifts (B, 2) float64 in samples (see the module docstring for the sign)."""
-    s = _coarse_shifts(reference, moving, upsample, window, max_shift)
+    → shifts (B, 2) float64 in samples (see the module docstring for the sign). ``weight``
+    (B or 1, H, W), non-negative: how much each sample of ``moving`` counts (multiplies the
+    Tukey window), e.g. 0 where the reference is not known."""
+    s = _coarse_shifts(reference, moving, upsample, window, max_shift, weight)
     if refine > 0:
-        s = _refine_shifts(reference, moving, s, window, refine)
+        s = _refine_shifts(reference, moving, s, window, refine, weight)
     if max_shift is not None:
         s = s.clamp(-max_shift, max_shift)
     return s
