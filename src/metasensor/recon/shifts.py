@@ -104,7 +104,7 @@ def _coarse_shifts(reference: torch.Tensor, moving: torch.Tensor, upsample: int,
     wsum = win.sum(dim=(-2, -1), keepdim=True).clamp(min=1e-12)
 
     def prep(x):
-        x = x - (x * win).sum(dim=(-2, -1), keepdim=True) / wsum
+        x = x - x.mean(dim=(-2, -1), keepdim=True)
         x = x * win
         return x - (x.sum(dim=(-2, -1), keepdim=True) / wsum) * win
 
