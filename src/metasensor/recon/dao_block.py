@@ -41,13 +41,16 @@ def _upsample(views: torch.Tensor, d: int) -> torch.Tensor:
 
 
 class DaoBlock:
-    """Geometry and data of one block: up-sampled views, their FFT padding, the PSF spectra.
+    """Geometry and data of one block: up-sampled views, their FFT padding, the PSF spectra and
+    the weights of the view samples in the shift measurement (per PSF bank, :meth:`set_psfs`).
 
     Memory: the up-sampled views and the PSF spectra of all views are kept when they fit in
     ``cache_bytes`` (default 1 GiB); otherwise (large blocks, e.g. 2,000² px × 113 views) they
     are recomputed per chunk of views (one bicubic up-sampling and one FFT per view more per
     pass), and the chunk is reduced so that the deconvolution's ~12 grid-sized work arrays per
     view stay within the same budget."""
+
+    known = 0.95  # inside fraction below which a predicted view sample gets no weight
 
     def __init__(self, views: torch.Tensor, cfg: SystemConfig, used: np.ndarray, lam: float,
                  chunk: int, cache_bytes: int = 1 << 30):
@@ -61,7 +64,6 @@ class DaoBlock:
         self.chunk0 = max(int(chunk), 1)
         self.cache_bytes = int(cache_bytes)
         self.betas = beta_schedule()
-        self.known = 0.95  # inside fraction below which a predicted sample gets no weight
         self._up = None
 
     def _up_chunk(self, b: slice) -> torch.Tensor:
@@ -94,14 +96,17 @@ class DaoBlock:
         dom = torch.zeros(self.shape, device=self.views.device, dtype=self.views.dtype)
         dom[self.pad:self.pad + hh, self.pad:self.pad + ww] = 1.0
         self.domain_spec = torch.fft.rfft2(dom)
+        d = self.d
+        self.sample_weight = torch.cat([  # (B, h, w), fixed while the PSFs are
+            self.reliability(self._inside(slice(a, a + self.chunk))[:, d // 2::d, d // 2::d])
+            for a in range(0, nv, self.chunk)])
 
-    def _inside(self, b: slice, otf: torch.Tensor | None = None) -> torch.Tensor:
+    def _inside(self, b: slice) -> torch.Tensor:
         """Fraction (chunk, H, W) of each view pixel's predicted light that comes from image
         pixels inside the block (1_block ⊛ H; kernels have unit sum)."""
         p = self.pad
         hh, ww = self.hw
-        otf = self._otf_chunk(b) if otf is None else otf
-        spec = self.domain_spec * otf
+        spec = self.domain_spec * self._otf_chunk(b)
         return torch.fft.irfft2(spec, s=self.shape)[:, p:p + hh, p:p + ww].clamp(0.0, 1.0)
 
     def reliability(self, frac: torch.Tensor) -> torch.Tensor:
@@ -132,27 +137,21 @@ class DaoBlock:
         # each deconvolved view estimates I (kernels have unit sum, views carry e_uv·I)
         return (acc / self.energy.sum()).clamp(min=0)
 
-    def predict(self, image: torch.Tensor, weights: bool = False):
-        """S_d(I ⊛ H_uv) for every used view → (B, h, w) (scan-step grid, view scale); with
-        ``weights`` also the reliability (B, h, w) of every predicted sample (:meth:`_inside`:
-        how much of its light comes from inside the block, where I is known)."""
+    def predict(self, image: torch.Tensor) -> torch.Tensor:
+        """S_d(I ⊛ H_uv) for every used view → (B, h, w) (scan-step grid, view scale)."""
         p, d = self.pad, self.d
         hh, ww = image.shape
         spec = torch.fft.rfft2(pad_fade(image[None], p))
-        out, wts = [], []
+        out = []
         for a in range(0, self.views.shape[0], self.chunk):
             b = slice(a, a + self.chunk)
-            otf = self._otf_chunk(b)
-            conv = torch.fft.irfft2(spec * otf, s=self.shape)[:, p:p + hh, p:p + ww]
+            conv = torch.fft.irfft2(spec * self._otf_chunk(b), s=self.shape)[:, p:p + hh,
+                                                                               p:p + ww]
             out.append(conv[:, d // 2::d, d // 2::d] * self.energy[b, None, None])
-            if weights:
-                frac = self._inside(b, otf=otf)[:, d // 2::d, d // 2::d]
-                wts.append(self.reliability(frac))
-        return (torch.cat(out), torch.cat(wts)) if weights else torch.cat(out)
+        return torch.cat(out)
 
     def measure(self, image: torch.Tensor, max_shift_px: float) -> torch.Tensor:
         """Shifts (B, 2) in pixels of the measured views against the prediction."""
-        pred, wts = self.predict(image, weights=True)
-        s = measure_shifts_torch(pred, self.views / self.scale,
-                                 max_shift=max_shift_px / self.d, weight=wts)
+        s = measure_shifts_torch(self.predict(image), self.views / self.scale,
+                                 max_shift=max_shift_px / self.d, weight=self.sample_weight)
         return s * self.d

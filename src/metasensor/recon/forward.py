@@ -196,7 +196,7 @@ class PhaseSpaceOperator:
     def backproject_conj(self, samples: torch.Tensor, views: slice | torch.Tensor,
                          acc: torch.Tensor | None = None) -> torch.Tensor:
         """Accumulate the *conjugate* of the back-projected half spectrum, Σ OTF·conj(U), into
-        ``acc`` (d, My, Nh) in place; ``acc.conj().reshape(Ny, Nh)`` is the spectrum of Aᵀ·samples.
+        ``acc`` (d, My, Nh) in place; :meth:`image_from_conj` turns it into Aᵀ·samples.
         Conjugating once per sum instead of once per view chunk saves a full-size copy per chunk;
         conj(fft2(x)) of the real samples is their unnormalised inverse FFT (no copy either)."""
         d = self.geometry.d
@@ -215,6 +215,10 @@ class PhaseSpaceOperator:
     def image_from_spectrum(self, spec: torch.Tensor) -> torch.Tensor:
         ny, nx = self.geometry.domain
         return torch.fft.irfft2(spec, s=(ny, nx))
+
+    def image_from_conj(self, acc: torch.Tensor) -> torch.Tensor:
+        """The (Ny, Nx) image of a :meth:`backproject_conj` accumulator."""
+        return self.image_from_spectrum(acc.conj().reshape(self.geometry.domain[0], -1))
 
     def _chunks(self, views=None):
         if views is None:
@@ -253,14 +257,13 @@ class PhaseSpaceOperator:
         if tuple(samples.shape) != (n, *self.geometry.grid):
             raise ValueError(f"samples must have shape {(n, *self.geometry.grid)}, "
                              f"got {tuple(samples.shape)}")
-        ny, _ = self.geometry.domain
         acc = self.new_conj_accumulator()
         start = 0
         for c in self._chunks(views):
             count = len(range(self.n_views)[c]) if isinstance(c, slice) else len(c)
             self.backproject_conj(samples[start:start + count], c, acc)
             start += count
-        return self.image_from_spectrum(acc.conj().reshape(ny, -1))
+        return self.image_from_conj(acc)
 
     def sensitivity(self, mask: torch.Tensor, views=None) -> torch.Tensor:
         """Aᵀ applied to ``mask`` (My, Mx) on every view in ``views``: (Ny, Nx), >= 0 up to fp."""

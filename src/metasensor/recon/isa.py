@@ -134,7 +134,6 @@ def richardson_lucy(op: PhaseSpaceOperator, data: torch.Tensor, mask: torch.Tens
         estimate = torch.clamp(torch.as_tensor(init, dtype=torch.float32, device=dev), min=0)
         estimate = estimate.clone()
     history: list[float] = []
-    ny, nx = op.geometry.domain
     for _ in range(iterations):
         sq = 0.0
         for g, s, v in zip(idx, sens, valid, strict=True):
@@ -148,7 +147,7 @@ def richardson_lucy(op: PhaseSpaceOperator, data: torch.Tensor, mask: torch.Tens
                 sq += float(torch.vdot(resid.flatten(), resid.flatten()))
                 ratio = torch.div(y, pred.clamp_(min=floor), out=pred).mul_(maskf)
                 op.backproject_conj(ratio, c, acc)
-            back = op.image_from_spectrum(acc.conj().reshape(ny, nx // 2 + 1))
+            back = op.image_from_conj(acc)
             update = torch.where(v, torch.clamp(back, min=0.0) / s, torch.ones_like(s))
             estimate = estimate * update
         history.append(math.sqrt(sq) / data_norm)
