@@ -6,7 +6,9 @@ shift measurement (:class:`metasensor.recon.dao_block.DaoBlock`). PSF regenerati
 (``view_psfs``, the optics stage, once per three iterations) is timed separately. The FFT
 reference times the real FFTs of the same sizes and counts on the same device: per view 6 β
 steps × (2 forward + 1 inverse) + 1 for the data, 1 inverse for the prediction, 1 inverse for
-the known-region weights of the prediction, and the correlation's complex FFTs.
+the known-region weights of the prediction, and the correlation's complex FFTs. Not timed: the
+shift precisions that weight the Zernike fit (once per update, i.e. per three iterations: one
+real FFT pair per view on the scan-step grid, 1/9 of the pixel grid's area for a 5×5 scan).
 
 The PSFs are those of a 1 λ r.m.s. random aberration (modes 4–45, seed 0), on two windows: the
 DAO default (``psf_size="auto"``, :func:`metasensor.recon.dao.psf_window`: ray reach over the

@@ -197,8 +197,9 @@ def run(quick: bool = False) -> list[dict]:
         scenes, levels, draws, size = ("camera", "astronaut"), LEVELS, (0, 1, 2), 150
     # 3 λ: rays reach 110-190 px, more than a 150-px block (measured: wave DAO diverged there,
     # residual 3.5 λ), hence 240 px. Measured (2 scenes × 3 draws, 8 updates at most): wave DAO
-    # 0.33-0.93 λ residual, PSNR 0.0-0.5 dB under the oracle, 3.8-6.8 dB over geometric DAO
-    # (before the shift measurement's known-region weights, draw 0: 1.92 λ)
+    # 0.12-0.31 λ residual (5 of 6 ≤ 0.3), PSNR 0.0-0.06 dB under the oracle, 4.3-5.4 dB over
+    # geometric DAO; 1 λ: 0.027-0.056 λ in 3 updates. Before the precision-weighted fit:
+    # 0.33-0.93 λ and 0.041-0.120 λ; before the known-region weights, 3 λ draw 0: 1.92 λ
     env = os.environ.get("ED_FIG4_LEVELS")  # e.g. "0.5,1": a subset of the levels
     if env:
         levels = tuple(float(v) for v in env.split(","))

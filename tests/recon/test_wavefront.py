@@ -89,6 +89,27 @@ def test_fit_noise_and_outliers(matrix, rng):
     assert fit.inliers.sum() >= 100
 
 
+def test_precision_weights_lower_the_error_of_unequal_views(matrix):
+    # Gauss–Markov: views of unequal noise (σ 0.1 px for most, 2 px for a third of them, as
+    # DAO's precisions span at 3 λ) fitted with weights 1/σ² give a smaller error than the plain
+    # fit. Over 20 draws (1 λ, rejection off): mean error 0.024 vs 0.146 λ measured; asserted
+    # weighted < 0.5 × plain, and weighted better in at least 18 of 20 draws (measured 20)
+    z = random_zernike(1.0, seed=6)
+    used = CFG.view_mask()
+    sigma = np.where(np.random.default_rng(0).random((15, 15)) < 1 / 3, 2.0, 0.1)
+    err = {True: [], False: []}
+    for seed in range(20):
+        noise = np.random.default_rng(seed).normal(0, 1, (15, 15, 2)) * sigma[..., None]
+        s = predicted_shifts(z, CFG, matrix=matrix) + noise
+        for weighted in (True, False):
+            fit = fit_shifts(s, CFG, mask=used, weights=1 / sigma**2 if weighted else None,
+                             reject=0, matrix=matrix)
+            err[weighted].append(zernike_rms(fit.zernike - z))
+    w, p = np.array(err[True]), np.array(err[False])
+    assert w.mean() < 0.5 * p.mean()
+    assert (w < p).sum() >= 18
+
+
 def test_zernike_rms_excludes_piston_tip_tilt():
     z = np.zeros(45)
     z[:3] = 5.0

@@ -13,7 +13,7 @@ import torch
 from metasensor.backend import as_tensor
 from metasensor.config import SystemConfig
 from metasensor.recon.fastdeconv import beta_schedule, kf_deconv, pad_fade, psf2otf
-from metasensor.recon.shifts import fourier_shift, measure_shifts_torch
+from metasensor.recon.shifts import fourier_shift, measure_shifts_torch, shift_precision
 
 __all__ = ["DaoBlock"]
 
@@ -150,8 +150,14 @@ class DaoBlock:
             out.append(conv[:, d // 2::d, d // 2::d] * self.energy[b, None, None])
         return torch.cat(out)
 
-    def measure(self, image: torch.Tensor, max_shift_px: float) -> torch.Tensor:
-        """Shifts (B, 2) in pixels of the measured views against the prediction."""
-        s = measure_shifts_torch(self.predict(image), self.views / self.scale,
-                                 max_shift=max_shift_px / self.d, weight=self.sample_weight)
-        return s * self.d
+    def measure(self, image: torch.Tensor, max_shift_px: float,
+                precision: bool = False) -> torch.Tensor | tuple[torch.Tensor, torch.Tensor]:
+        """Shifts (B, 2) in pixels of the measured views against the prediction; with
+        ``precision``, also each shift's precision (B,) in 1/pixels² (:func:`shift_precision`)."""
+        pred = self.predict(image)
+        mov = self.views / self.scale
+        s = measure_shifts_torch(pred, mov, max_shift=max_shift_px / self.d,
+                                 weight=self.sample_weight)
+        if not precision:
+            return s * self.d
+        return s * self.d, shift_precision(pred, mov, s, weight=self.sample_weight) / self.d**2

@@ -22,7 +22,7 @@ import torch
 
 from metasensor.backend import as_tensor, resolve_device, to_numpy
 
-__all__ = ["fourier_shift", "measure_shifts", "measure_shifts_torch", "tukey2d"]
+__all__ = ["fourier_shift", "measure_shifts", "measure_shifts_torch", "shift_precision", "tukey2d"]
 
 
 def tukey2d(shape: tuple[int, int], alpha: float = 0.25, device=None,
@@ -169,10 +169,7 @@ def _refine_shifts(reference: torch.Tensor, moving: torch.Tensor, shifts: torch.
     eye = 1e-9 * torch.eye(4, dtype=torch.float64, device=moving.device)
     for _ in range(iterations):
         r, valid = _warp(reference, s)
-        gy = torch.zeros_like(r)
-        gx = torch.zeros_like(r)
-        gy[:, 1:-1] = 0.5 * (r[:, 2:] - r[:, :-2])
-        gx[:, :, 1:-1] = 0.5 * (r[:, :, 2:] - r[:, :, :-2])
+        gy, gx = _gradients(r)
         wgt = win * valid
         # model a·r(p − s) + c; Jacobian columns (−a ∂y r, −a ∂x r, r, 1); a is absorbed below
         cols = [-gy, -gx, r, torch.ones_like(r)]
@@ -194,6 +191,40 @@ def _refine_shifts(reference: torch.Tensor, moving: torch.Tensor, shifts: torch.
         step = coef[:, :2] / gain[:, None]
         s = s + step.clamp(-1.0, 1.0)
     return s
+
+
+def _gradients(r: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """Central differences (rows, columns) of ``r (B, H, W)``, 0 on the outer samples."""
+    gy = torch.zeros_like(r)
+    gx = torch.zeros_like(r)
+    gy[:, 1:-1] = 0.5 * (r[:, 2:] - r[:, :-2])
+    gx[:, :, 1:-1] = 0.5 * (r[:, :, 2:] - r[:, :, :-2])
+    return gy, gx
+
+
+def shift_precision(reference: torch.Tensor, moving: torch.Tensor, shifts: torch.Tensor,
+                    window: float = 0.25, weight: torch.Tensor | None = None) -> torch.Tensor:
+    """Precision (B,) of measured shifts, in 1/samples²: ``2 / (var(s_y) + var(s_x))`` for the
+    model ``moving(p) = a·reference(p − s) + c + noise`` at ``s = shifts``, solved by weighted
+    least squares: ``var(s_k) = σ² Σ w² g_k² / (a Σ w g_k²)²`` (g_k the reference's gradient,
+    (a, c) fitted, σ² the weighted variance of the residual; w the Tukey window times ``weight``
+    times the mask where the warped reference is defined, as in the Gauss–Newton refinement).
+    Under white noise its inverse is the variance of each shift component, so a joint fit of many
+    shifts (e.g. the DAO wavefront fit) can weight them by it. 0 where nothing is weighted."""
+    r, valid = _warp(reference, shifts.double())
+    gy, gx = _gradients(r)
+    w = _window(moving, window, weight) * valid
+    sw = w.sum(dim=(-2, -1)).clamp(min=1e-30)
+    rc = r - ((w * r).sum(dim=(-2, -1)) / sw)[:, None, None]
+    mc = moving - ((w * moving).sum(dim=(-2, -1)) / sw)[:, None, None]
+    a = (w * rc * mc).sum(dim=(-2, -1)) / (w * rc * rc).sum(dim=(-2, -1)).clamp(min=1e-30)
+    var = (w * (mc - a[:, None, None] * rc) ** 2).sum(dim=(-2, -1)) / sw
+    # a floor of 1e-12 of the signal's variance keeps noise-free data finite
+    var = torch.maximum(var, 1e-12 * (w * mc * mc).sum(dim=(-2, -1)) / sw)
+    # weighted least squares: var(s_k) = σ² Σ w² g_k² / (a Σ w g_k²)² (the sandwich form)
+    var_s = sum((w * w * g * g).sum(dim=(-2, -1)) / (w * g * g).sum(dim=(-2, -1)).square()
+                .clamp(min=1e-30) for g in (gy, gx)) * var / (a * a).clamp(min=1e-30)
+    return torch.where(var_s > 0, 2.0 / var_s.clamp(min=1e-300), 0.0).double()
 
 
 def measure_shifts_torch(reference: torch.Tensor, moving: torch.Tensor, upsample: int = 10,
