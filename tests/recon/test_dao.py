@@ -138,7 +138,8 @@ def test_wave_dao_three_waves():
     # acceptance: residual ≤ 0.3 λ for a 3 λ random aberration. The data's bank is 80 px wider
     # than the DAO window (view_psfs' default window is ~900 px at 3 λ: several GB).
     # Measured before the shift measurement's known-region weights: 1.407, 0.818, 0.281, 0.184 λ
-    # after updates 1-4 (240-px block, rays reach ~106 px); passes with them too
+    # after updates 1-4 (240-px block, rays reach ~106 px); passes with them and with the
+    # precision-weighted fit too
     from metasensor.recon.dao import psf_window
 
     z = random_zernike(3.0, seed=3)
@@ -152,8 +153,8 @@ def test_wave_dao_three_waves():
 @pytest.mark.slow
 def test_wave_dao_noise_10db():
     # acceptance (Extended Data Fig. 5): residual ≤ 0.2 λ at 1 λ input and SNR 10 dB
-    # measured (auto PSF window): 0.335, 0.157, 0.131 λ after updates 1-3 (update r.m.s. 0.851,
-    # 0.274, 0.126, so all 3 run); a 4th gives 0.169 (noise floor); lam = 2e3: 0.175, 0.146, 0.120
+    # measured with the precision-weighted fit: 0.112 λ after 3 updates (update r.m.s. 0.854,
+    # 0.311, 0.107); with the plain fit 0.149 λ (0.853, 0.308, 0.113)
     resid, _ = _residual_case(1.0, 10, 4)
     assert resid <= 0.2
 

@@ -29,10 +29,13 @@ Alternate, starting from φ = ``init`` (or 0):
    Not in the paper (added here): the fit weights every view by the precision of its shift
    (:func:`metasensor.recon.shifts.shift_precision`: the inverse variance of the shift under
    white noise, from the prediction's gradients and the residual; the paper's fit weighs all
-   views alike; ``weigh_views=False`` restores that). At 3 λ the views' precisions span two
-   orders of magnitude (few known samples, blurred or dim views); the plain fit let the poor
-   ones set the low orders. Measured (240-px blocks, 3 λ, wave DAO from φ = 0, 8 updates at
-   most): camera draw 0 0.61 → 0.22 λ residual; ``benchmarks/bench_ed_fig4.py`` has all draws.
+   views alike; ``weigh_views=False`` restores that). At 3 λ the views' precisions span more
+   than two orders of magnitude (few known samples, blurred or dim views); the plain fit let
+   the poor ones set the low orders (radial orders 2–5 held 0.3–0.4 λ each of the remaining
+   error). Measured (``benchmarks/bench_ed_fig4.py``, 2 scenes × 3 draws, wave DAO from φ = 0):
+   3 λ on 240-px blocks, 0.33–0.93 → 0.12–0.31 λ residual; 1 λ on 150-px blocks after 3
+   updates, 0.041–0.120 → 0.027–0.056 λ; 1 λ at SNR 10 dB (``tests/recon/test_dao.py``),
+   0.149 → 0.112 λ.
 
 ``history`` holds the r.m.s. (waves, modes 4–45) of every update. Views used: ``cfg.view_mask()``
 (113 for the prototype) and, when a pupil amplitude is given, its lit views. The mean in step 2
