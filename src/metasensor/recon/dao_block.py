@@ -118,11 +118,15 @@ class DaoBlock:
     def estimate(self, shifts_px: torch.Tensor) -> torch.Tensor:
         """I = Σ_uv e_uv Deconv(V_uv(p + s_uv), Ĥ_uv) / Σ e_uv on the pixel grid (H, W).
 
-        Not weighted by the known region (unlike :meth:`measure`). Measured: weighting each
-        view's estimate by the same reliability of its field (1_block ⋆ H) brought 3 λ closer
-        (ED Fig. 4, 6 draws: 0.26-0.68 λ, 4 of 6 ≤ 0.3 λ, against 0.33-0.93 λ without) but
-        failed at low SNR (1 λ, 10 dB: 0.28 λ against 0.15 λ; target 0.2 λ); weighting by the
-        fraction itself kept 0.15 λ at 10 dB but ended 3 λ draw 1 at 0.33 / 0.81 λ."""
+        Not weighted by the known region (unlike :meth:`measure`). Measured, with the plain
+        (unweighted) Zernike fit: weighting each view's estimate by the same reliability of its
+        field (1_block ⋆ H) brought 3 λ closer (ED Fig. 4, 6 draws: 0.26-0.68 λ, 4 of 6 ≤ 0.3 λ,
+        against 0.33-0.93 λ without) but failed at low SNR (1 λ, 10 dB: 0.28 λ against 0.15 λ;
+        target 0.2 λ); weighting by the fraction itself kept 0.15 λ at 10 dB but ended 3 λ
+        draw 1 at 0.33 / 0.81 λ. With the precision-weighted fit (``run_dao``'s default) the
+        reliability weighting gives 0.111 λ at 10 dB, and on the one 3 λ draw the default misses
+        (astronaut, draw 1: 0.306 λ) it ends at 0.255 λ but wanders 0.22-0.34 λ over updates
+        4-8; not adopted without the full ED Fig. 4 re-run."""
         p = self.pad
         hh, ww = self.hw
         acc = torch.zeros((hh, ww), device=self.views.device, dtype=self.views.dtype)
