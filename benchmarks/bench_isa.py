@@ -1,4 +1,5 @@
-"""ISA (phase-space Richardson–Lucy) speed: wall time vs the time of the FFTs it needs.
+"""ISA speed (phase-space Richardson–Lucy, and the default sparse-gradient solver ``recon.hqs``):
+wall time vs the time of the FFTs it needs.
 
 Full mode (the issue): 2,010 x 2,010-pixel output (134 x 134 lenslets, nnum 15, 5x5 scan, d = 3),
 113 views, 5 iterations, one block. Two FFT references, timed in the same run at the same sizes
@@ -68,6 +69,7 @@ def _problem(lenslets: int, device):
     sy, sx = geom.sample_slices()
     mask[sy, sx] = True
     data = data * mask
+    op.psf_bank = psf  # kept for the HQS rows (FoldedNormal needs the bank)
     return op, data, mask, otf_s, source
 
 
@@ -135,6 +137,57 @@ def _speed_rows(lenslets: int, iterations: int, variants, device) -> list[dict]:
                      "ratio_own": wall / own, "fft_conventional_s": conv,
                      "ratio_conventional": wall / conv})
     return rows
+
+
+def _hqs_row(lenslets: int, device) -> dict:
+    """The default solver (recon.hqs) on the same problem: wall time, the RL wall time of the
+    same run (5 iterations, 16 subsets), and the FFTs it needs: its forward/adjoint calls (each
+    half of an RL iteration's simultaneous FFTs), its folded-normal solves (a complex FFT2 pair
+    of the domain) and the folded normal's build (one complex FFT2 of the domain per view)."""
+    from metasensor.recon import hqs
+    from metasensor.recon.isa import richardson_lucy
+    from metasensor.recon.normal import FoldedNormal
+
+    op, data, mask, _, source = _problem(lenslets, device)
+    counts = {"forward": 0, "adjoint": 0, "solve": 0}
+    orig = {"forward": op.forward, "adjoint": op.adjoint, "solve": FoldedNormal.solve}
+
+    def counted(name, fn):
+        def wrapper(*a, **k):
+            counts[name] += 1
+            return fn(*a, **k)
+        return wrapper
+
+    op.forward, op.adjoint = counted("forward", op.forward), counted("adjoint", op.adjoint)
+    FoldedNormal.solve = counted("solve", orig["solve"])
+    try:
+        _sync(op.device)
+        t0 = time.perf_counter()
+        hqs.hyper_laplacian_isa(op, op.psf_bank, data, mask, noise=1e-3 * float(data.std()))
+        _sync(op.device)
+        wall = time.perf_counter() - t0
+    finally:
+        FoldedNormal.solve = orig["solve"]
+        op.forward, op.adjoint = orig["forward"], orig["adjoint"]
+    t0 = time.perf_counter()
+    richardson_lucy(op, data, mask, iterations=5, subsets=16)
+    _sync(op.device)
+    rl_wall = time.perf_counter() - t0
+    pair, _ = _fft_times(op, 1, 1)
+    ny, nx = op.geometry.domain
+    z = torch.rand((ny, nx), device=op.device, dtype=torch.complex64)
+    _sync(op.device)
+    t0 = time.perf_counter()
+    for _ in range(4):
+        torch.fft.ifft2(torch.fft.fft2(z))
+    _sync(op.device)
+    solve_fft = (time.perf_counter() - t0) / 4
+    fft = (0.5 * (counts["forward"] + counts["adjoint"]) * pair + counts["solve"] * solve_fft
+           + op.n_views * solve_fft / 2)
+    return {"solver": "hqs", "output_px": lenslets * 15, "views": op.n_views,
+            "domain": ny, "psf": source, "device": str(op.device), "wall_s": wall,
+            "rl_5it_wall_s": rl_wall, "ratio_to_rl": wall / rl_wall, **counts,
+            "fft_needed_s": fft, "ratio_fft": wall / fft}
 
 
 def _quality_rows(iterations: int) -> list[dict]:
@@ -212,11 +265,11 @@ def _edge_rows() -> list[dict]:
     band = np.ones(truth.shape, bool)
     band[15:-15, 15:-15] = False
     rows = []
-    for pad in (True, False):
-        img = reconstruct(cap.views, cfg, psf=bank, pad=pad).image
+    for solver, pad in (("rl", True), ("rl", False), ("hqs", True), ("hqs", False)):
+        img = reconstruct(cap.views, cfg, psf=bank, pad=pad, solver=solver).image
         _, smap = structural_similarity(truth, img, data_range=dr, full=True)
         err = (img.astype(np.float64) - truth) ** 2
-        rows.append({"edges": "padded" if pad else "circular",
+        rows.append({"edges": "padded" if pad else "circular", "solver": solver,
                      "psnr_band_db": float(10 * np.log10(dr**2 / err[band].mean())),
                      "psnr_inner_db": float(10 * np.log10(dr**2 / err[~band].mean())),
                      "ssim_band": float(smap[band].mean()),
@@ -229,8 +282,10 @@ def run(quick: bool = False) -> list[dict]:
 
     device = str(resolve_device(None))
     rows = _speed_rows(20, 2, (1, 16, 113), device)
+    rows.append(_hqs_row(20, device))
     if not quick:
         rows += _speed_rows(134, 5, (16,), device)
+        rows.append(_hqs_row(134, device))
         rows += _quality_rows(10)
         rows += _edge_rows()
     return rows

@@ -13,6 +13,15 @@ image ``(Ly·nnum, Lx·nnum)``. Each block gets its own PSF bank from its local 
 (``zernike`` everywhere plus ``field_zernike`` at the block), or a given bank (``psf=``);
 ``method="wave"``/``"geometric"`` first estimate the block's aberration with DAO
 (:func:`metasensor.recon.dao.estimate_block_aberration`), then run ISA with it.
+
+ISA solver (``solver=``): ``"hqs"``, the phase-space deconvolution with a sparse-gradient prior
+(:mod:`metasensor.recon.hqs`), or ``"rl"``, the authors' ordered-subset Richardson–Lucy
+(:mod:`metasensor.recon.isa`; ``iterations`` and ``subsets`` apply to it). ``"auto"`` (default)
+takes HQS when the scan step is at most 5 pixels (scans 3 x 3, 5 x 5, 15 x 15) and RL otherwise
+(a 1 x 1 scan: HQS would factor 225 x 225 systems per frequency); giving ``iterations`` (a number
+of Richardson–Lucy iterations) also selects RL. Measured on simulated 192-px
+captures, 5 x 5 scan, 30 dB: SSIM 0.901 (chart) / 0.778 (camera) for HQS against 0.516 / 0.671
+for RL, the best linear reconstruction on model-exact data reaching 0.56 / 0.66.
 """
 
 from __future__ import annotations
@@ -30,6 +39,8 @@ from metasensor.recon.isa import DEFAULT_ITERATIONS, DEFAULT_SUBSETS, subset_maj
 __all__ = ["reconstruct", "Reconstruction", "BlockTask", "reconstruct_block"]
 
 _METHODS = ("isa", "wave", "geometric")
+_SOLVERS = ("auto", "hqs", "rl")
+HQS_MAX_STEP = 5  # "auto": HQS up to this scan step (pixels), RL above
 
 
 @dataclass
@@ -45,6 +56,7 @@ class Reconstruction:
     iterations: int
     subsets: int
     seconds: float
+    solver: str = "rl"  # the ISA solver used: "hqs" or "rl"
     dao_history: list = field(default_factory=list)  # [by][bx] -> DAO history (wave/geometric)
 
 
@@ -67,6 +79,8 @@ class BlockTask:
     dao_kwargs: dict = field(default_factory=dict)
     progress: Any = None  # callable(n) for local runs only
     windowed: bool = False  # ``views`` already holds just this block's window
+    solver: str = "rl"
+    solver_kwargs: dict = field(default_factory=dict)
 
 
 @dataclass
@@ -154,8 +168,14 @@ def reconstruct_block(task: BlockTask) -> BlockResult:
     sl = geometry.sample_slices()
     data[:, sl[0], sl[1]] = torch.from_numpy(data_win).to(op.device)
     mask[sl] = True
-    result = richardson_lucy(op, data, mask, iterations=task.iterations, subsets=task.subsets,
-                             progress=task.progress)
+    if task.solver == "hqs":
+        from metasensor.recon.hqs import hyper_laplacian_isa
+
+        result = hyper_laplacian_isa(op, psf, data, mask, progress=task.progress,
+                                     **task.solver_kwargs)
+    else:
+        result = richardson_lucy(op, data, mask, iterations=task.iterations,
+                                 subsets=task.subsets, progress=task.progress)
     window_img = geometry.crop(result.estimate).detach().cpu().numpy()
     ry, rx = task.block.region_in_window()
     return BlockResult(task.block, np.ascontiguousarray(window_img[ry, rx], dtype=np.float32),
@@ -184,12 +204,15 @@ def reconstruct(views, cfg: SystemConfig, method: str = "isa", zernike=None, fie
                 view_radius: float | None = None,
                 order: str = "spiral", margin: int | None = None, pad: bool = True,
                 scheduler=None, num_workers: int | None = None, out=None, progress: bool = False,
-                dao_kwargs: dict | None = None) -> Reconstruction:
+                dao_kwargs: dict | None = None, solver: str = "auto",
+                solver_kwargs: dict | None = None) -> Reconstruction:
     """Reconstruct the image from views (see the module docstring for the contract).
 
     psf : a given (nnum, nnum, K, K) bank for every block (skips PSF generation), or None.
     psf_fn : callable(cfg, zernike (J,), device) -> bank, replacing ``optics.psf.view_psfs``.
     subsets : view subsets per Richardson–Lucy iteration (1 = simultaneous, n_views = sequential).
+    solver : "auto", "hqs" or "rl" (module docstring); solver_kwargs : passed to
+        :func:`metasensor.recon.hqs.hyper_laplacian_isa` (e.g. ``lam_scale``, ``noise``).
     view_radius : pupil radius (views) of the views used (``cfg.view_mask``; default 113 views).
     order : "spiral" (outside in, the authors'), "radius" (inside out) or "raster".
     margin : pixels of extra view data around each block (default: the PSF radius).
@@ -207,10 +230,15 @@ def reconstruct(views, cfg: SystemConfig, method: str = "isa", zernike=None, fie
         by, bx = (int(blocks[0]), int(blocks[1]))
     except (TypeError, ValueError, IndexError):
         raise ValueError(f"blocks must be a pair (by, bx), got {blocks!r}") from None
+    rl_asked = iterations is not None
     iterations = DEFAULT_ITERATIONS if iterations is None else int(iterations)
     if iterations < 0:
         raise ValueError(f"iterations must be >= 0, got {iterations}")
     d = cfg.scan_step_px
+    if solver not in _SOLVERS:
+        raise ValueError(f"solver must be one of {_SOLVERS}, got {solver!r}")
+    if solver == "auto":
+        solver = "hqs" if (d <= HQS_MAX_STEP and not rl_asked) else "rl"
     shape = (views.shape[2] * d, views.shape[3] * d)
     if psf is not None:
         psf = np.asarray(psf, dtype=np.float32)
@@ -237,14 +265,21 @@ def reconstruct(views, cfg: SystemConfig, method: str = "isa", zernike=None, fie
     if progress:
         from tqdm import tqdm
 
-        bar = tqdm(total=len(block_list) * iterations, desc="reconstruct", unit="it")
+        steps = iterations
+        if solver == "hqs":
+            from metasensor.recon.fastdeconv import beta_schedule
+            from metasensor.recon.hqs import DEFAULT_BETA_MAX
+
+            kw = dict(solver_kwargs or {})
+            steps = len(beta_schedule(kw.get("beta0", 1.0), kw.get("beta_max", DEFAULT_BETA_MAX)))
+        bar = tqdm(total=len(block_list) * steps, desc="reconstruct", unit="it")
     local = scheduler is None or scheduler in ("threads", "sync")
     tick = bar.update if (bar is not None and local) else None
     # a remote cluster gets each block's window of an in-memory stack, not the whole stack
     ship = not local and isinstance(views, np.ndarray)
     tasks = [BlockTask(b, cfg, _window(views, b, d) if ship else views, uv, zern[b.index], psf,
                        psf_fn, method, iterations, n_subsets, dev, pad, dict(dao_kwargs or {}),
-                       tick, ship)
+                       tick, ship, solver, dict(solver_kwargs or {}))
              for b in block_list]
     stitcher = Stitcher(shape, out)
     history = [[[] for _ in range(bx)] for _ in range(by)]
@@ -260,7 +295,7 @@ def reconstruct(views, cfg: SystemConfig, method: str = "isa", zernike=None, fie
         zern_used[iy, ix, :] = 0
         zern_used[iy, ix, :min(z.size, zern_used.shape[-1])] = z[:zern_used.shape[-1]]
         if bar is not None and not local:
-            bar.update(iterations)
+            bar.update(len(res.history))
 
     from metasensor.recon.parallel import run_tasks
 
@@ -271,4 +306,4 @@ def reconstruct(views, cfg: SystemConfig, method: str = "isa", zernike=None, fie
         if bar is not None:
             bar.close()
     return Reconstruction(stitcher.out, zern_used, history, block_list, method, cfg, iterations,
-                          n_subsets, time.perf_counter() - t0, dao_hist)
+                          n_subsets, time.perf_counter() - t0, solver, dao_hist)

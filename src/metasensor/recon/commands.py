@@ -41,7 +41,8 @@ def write_outputs(out: Path, rec, views) -> list[Path]:
     with atomic_path(out / "zernike.npy") as tmp:
         np.save(tmp, rec.zernike)
     summary = {"method": rec.method, "blocks": [len(rec.history), len(rec.history[0])],
-               "iterations": rec.iterations, "subsets": rec.subsets, "seconds": rec.seconds,
+               "solver": rec.solver, "iterations": rec.iterations, "subsets": rec.subsets,
+               "seconds": rec.seconds,
                "shape": list(image.shape), "history": rec.history}
     atomic_write_text(out / "summary.json", json.dumps(summary, indent=1))
     c = rec.config.center
@@ -88,6 +89,8 @@ def register(app: typer.Typer) -> None:
             "its field map initialises DAO, or is used as is with --method isa"),
         blocks: str = typer.Option("1x1", help="multisite blocks, e.g. 4x4"),
         overlap: int = typer.Option(20, help="block overlap in output pixels"),
+        solver: str = typer.Option("auto", help="ISA solver: auto | hqs (sparse-gradient "
+                                   "prior) | rl (Richardson-Lucy)"),
         iterations: int | None = typer.Option(None, help="Richardson-Lucy iterations"),
         subsets: int | None = typer.Option(None, help="view subsets per iteration"),
         zernike: str | None = typer.Option(None, help="global aberration, e.g. '4:0.5,7:-0.2'"),
@@ -151,7 +154,7 @@ def register(app: typer.Typer) -> None:
         rec = reconstruct(stack, cfg, method=method, zernike=parse_zernike(zernike),
                           field_zernike=fz, blocks=_parse_blocks(blocks), overlap=overlap,
                           iterations=iterations, device=device, psf=bank, subsets=subsets,
-                          scheduler=scheduler, progress=True, out=target)
+                          scheduler=scheduler, progress=True, out=target, solver=solver)
         written = write_outputs(out, rec, stack)
         typer.echo(f"reconstructed {rec.image.shape[0]}x{rec.image.shape[1]} px in "
                    f"{rec.seconds:.1f} s -> {', '.join(str(p) for p in written)}")

@@ -1,0 +1,169 @@
+"""ISA with a hyper-Laplacian image prior: half-quadratic splitting on the phase-space operator.
+
+Hand-written (no library solves a multi-view, sampled deconvolution with a sparse-gradient
+prior). It extends Krishnan & Fergus (NeurIPS 2009; :mod:`metasensor.recon.fastdeconv`, the
+per-view deconvolution of DAO) from one convolution to the whole scanning light-field
+measurement ``A`` of :class:`metasensor.recon.forward.PhaseSpaceOperator`:
+
+    min_x  (lam/2)·||A x − y||²  +  Σ |∇x|^alpha
+
+split with auxiliary gradients w and a weight beta raised from ``beta0`` to ``beta_max``:
+
+    w-step: w = argmin |w|^alpha + (beta/2)(w − ∇x)²     (closed form, element-wise)
+    x-step: (AᵀA + (beta/lam)·∇ᵀ∇) x = Aᵀy + (beta/lam)·∇ᵀw
+
+The x-step is exact: AᵀA is block-diagonal in the Fourier domain (:class:`FoldedNormal`), and so
+is ∇ᵀ∇, so it costs two FFTs and a batched d² x d² Cholesky solve (factored once per beta).
+
+Why: Richardson–Lucy stops at what the data determine. 70 % of AᵀA's eigenvalues are below
+1e-4 of the largest for a 5 x 5 scan, so at 30 dB even the best *linear* reconstruction reaches
+SSIM 0.56 (chart) / 0.66 (natural image) (``benchmarks/bench_isa_limit.py``). The sparse-gradient
+prior fills those directions with edges instead of noise. Measured on simulated 192-px captures
+(inverse-crime free), 30 dB: SSIM 0.901 (chart) / 0.778 (camera) / 0.793 (astronaut, lam_scale
+0.4) against Richardson–Lucy's 0.516 / 0.671 / 0.646; at 20 dB 0.846 / 0.728 (RL 0.491 / 0.560),
+at 40 dB 0.941 / 0.817 (RL 0.519 / 0.689).
+
+Data weight: ``lam = lam_scale / sigma²`` on the image normalised to mean 0.5, with the noise
+sigma of the views estimated from the data (:func:`estimate_noise`) unless given. Unobserved
+samples (the padded margins of a window) make the x-step non-circular: it is then solved by
+conjugate gradients preconditioned with the circular solve (:func:`_pcg`, ``cg`` iterations from
+the previous x; on a padded chart window 0.917 vs 0.920 for the fully observed problem, where
+filling the margins with the prediction once per beta reached 0.650). The result is clipped at
+zero (flux stays within 1 %: measured 0.996-1.001).
+"""
+
+from __future__ import annotations
+
+import math
+
+import torch
+
+from metasensor.recon.fastdeconv import beta_schedule, solve_w_table
+from metasensor.recon.forward import PhaseSpaceOperator
+from metasensor.recon.isa import RLResult
+from metasensor.recon.normal import FoldedNormal, difference_weights
+
+__all__ = ["estimate_noise", "hyper_laplacian_isa", "DEFAULT_LAM_SCALE"]
+
+# lam·sigma² on the mean-0.5 image, sigma from estimate_noise. Measured on simulated captures
+# (192-px chart, camera, astronaut; 20/30/40 dB), SSIM for lam_scale 0.1 / 0.2 / 0.3 / 0.4 / 1:
+# the optimum lies at 0.3-0.4 at every SNR (30 dB chart 0.869 / - / 0.901 / - / 0.888, camera
+# 0.754 / - / 0.778 / - / 0.632). Too large a lam collapses (under-regularised: the near-null
+# directions fill with noise) while too small degrades gently, so the default keeps a 3x margin.
+DEFAULT_LAM_SCALE = 0.3
+DEFAULT_BETA_MAX = 4096.0
+# x-steps per beta and CG iterations per x-step: (3, 3) measured against (2, 2), (1, 3), (2, 1):
+# 30 dB chart SSIM 0.901 vs 0.881 / 0.702 / 0.695 (the cheaper ones leave the borders unsolved)
+DEFAULT_INNER = 3
+DEFAULT_CG = 3
+REG_FLOOR = 1e-4
+
+
+def estimate_noise(data: torch.Tensor, mask: torch.Tensor) -> float:
+    """Noise r.m.s. of view samples (V, My, Mx), from the median absolute value of their second
+    differences (robust to edges; the views are smooth on their sample grid because each sample
+    integrates a whole lenslet): sigma = 1.4826·MAD / sqrt(6) per axis, the two axes averaged."""
+    m = mask.to(torch.bool)
+    out = []
+    for axis in (0, 1):  # axis of the (My, Mx) sample grid
+        n = data.shape[axis + 1]
+        if n < 3:
+            continue
+        sec = (data.narrow(axis + 1, 0, n - 2) - 2 * data.narrow(axis + 1, 1, n - 2)
+               + data.narrow(axis + 1, 2, n - 2))
+        ok = m.narrow(axis, 0, n - 2) & m.narrow(axis, 1, n - 2) & m.narrow(axis, 2, n - 2)
+        vals = sec[:, ok]
+        if vals.numel():
+            out.append(float(vals.abs().median()) * 1.4826 / math.sqrt(6.0))
+    return float(sum(out) / len(out)) if out else 0.0
+
+
+def _grad(x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    return torch.roll(x, -1, 0) - x, torch.roll(x, -1, 1) - x
+
+
+def _grad_t(wy: torch.Tensor, wx: torch.Tensor) -> torch.Tensor:
+    return (torch.roll(wy, 1, 0) - wy) + (torch.roll(wx, 1, 1) - wx)
+
+
+def _pcg(normal, rhs, x, chol, nm: FoldedNormal, iterations: int) -> torch.Tensor:
+    """Conjugate gradients on ``normal(x) = rhs`` from ``x``, preconditioned by the circular,
+    fully observed system (``nm.solve`` with ``chol``), which differs from it only by the
+    unobserved samples: a few iterations suffice."""
+    r = rhs - normal(x)
+    z = nm.solve(r, chol)
+    p = z
+    rz = float(torch.vdot(r.flatten(), z.flatten()))
+    for _ in range(iterations):
+        q = normal(p)
+        pq = float(torch.vdot(p.flatten(), q.flatten()))
+        if not pq > 0:
+            break
+        a = rz / pq
+        x = x + a * p
+        r = r - a * q
+        z = nm.solve(r, chol)
+        rz_new = float(torch.vdot(r.flatten(), z.flatten()))
+        p = z + (rz_new / rz) * p if rz > 0 else z
+        rz = rz_new
+    return x
+
+
+def hyper_laplacian_isa(op: PhaseSpaceOperator, psf, data, mask, lam: float | None = None,
+                        alpha: float = 2.0 / 3.0, noise: float | None = None,
+                        lam_scale: float = DEFAULT_LAM_SCALE, beta0: float = 1.0,
+                        beta_max: float = DEFAULT_BETA_MAX, inner: int = DEFAULT_INNER,
+                        cg: int = DEFAULT_CG,
+                        progress=None) -> RLResult:
+    """Sparse-gradient ISA (module docstring) of ``data`` (V, My, Mx) observed where ``mask``.
+
+    psf : the operator's bank (V, K, K) (for the folded normal operator). lam : data weight on the
+    mean-0.5 image (default ``lam_scale / sigma²``). noise : the views' noise r.m.s. in data units
+    (default: :func:`estimate_noise`). Returns the estimate (Ny, Nx), non-negative, and the
+    relative residual ||y − A x||/||y|| (observed samples) after each beta.
+    """
+    if alpha not in (1.0,) and abs(alpha - 2.0 / 3.0) > 1e-9:
+        raise ValueError(f"alpha must be 2/3 or 1, got {alpha!r}")
+    if inner < 1:
+        raise ValueError(f"inner must be >= 1, got {inner}")
+    y, m = op.samples_and_mask(data, mask)
+    mf = m.to(torch.float32)
+    y = torch.nan_to_num(y) * mf
+    nm = FoldedNormal(op, psf)
+    sens = op.sensitivity(mf)
+    level = float(y.sum()) / max(float(sens.sum()), 1e-30)  # mean of the image
+    if not level > 0:
+        return RLResult(torch.zeros(op.geometry.domain, device=op.device), [])
+    unit = 2.0 * level  # image normalised to mean 0.5: x_n = x / unit
+    yn = y / unit
+    if lam is None:
+        sigma = estimate_noise(y, m) if noise is None else float(noise)
+        sigma_n = max(sigma / unit, 1e-6 * float(yn[:, m].abs().mean()))
+        lam = lam_scale / sigma_n**2
+    if not (lam > 0 and math.isfinite(lam)):
+        raise ValueError(f"lam must be positive and finite, got {lam!r}")
+    scale = float(nm.matrix.diagonal(dim1=-2, dim2=-1).real.max())
+    reg = difference_weights(nm, floor=REG_FLOOR)
+    full = bool(m.all())
+    norm_y = max(float(torch.linalg.vector_norm(yn)), 1e-30)
+    aty = op.adjoint(yn)
+    x = None
+    history: list[float] = []
+    for beta in beta_schedule(beta0, beta_max):
+        mu = beta / lam
+        chol = nm.factor(mu / scale, reg)
+
+        def normal(v, mu=mu):  # (AᵀMA + mu·L) v, L = ∇ᵀ∇ + floor (what chol factors without M)
+            return op.adjoint(op.forward(v) * mf) + mu * (_grad_t(*_grad(v)) + REG_FLOOR * v)
+
+        if x is None:
+            x = nm.solve(aty, chol)
+        for _ in range(inner):
+            gy, gx = _grad(x)
+            rhs = aty + mu * _grad_t(solve_w_table(gy, beta, alpha), solve_w_table(gx, beta, alpha))
+            x = nm.solve(rhs, chol) if full else _pcg(normal, rhs, x, chol, nm, cg)
+        res = (op.forward(x) - yn) * mf
+        history.append(float(torch.linalg.vector_norm(res)) / norm_y)
+        if progress is not None:
+            progress(1)
+    return RLResult(torch.clamp(x, min=0.0) * unit, history)
