@@ -64,11 +64,12 @@ def test_blocks_no_seams(capture, bank):
 
 
 def test_solver_selection_and_hqs_contract(capture, bank):
-    # "auto": the sparse-gradient prior (hqs) for a 5 x 5 scan, Richardson-Lucy when iterations
-    # are given. HQS keeps the contract: shape, float32, finite, non-negative, flux within 1 %,
-    # one residual per continuation step; it fits this smooth scene better than 3 RL iterations.
+    # Richardson-Lucy by default; solver="hqs" (the sparse-gradient prior) keeps the contract:
+    # shape, float32, finite, non-negative, flux within 1 %, one residual per continuation step;
+    # it fits this smooth, aberration-free scene better than 3 RL iterations.
     views, truth = capture
-    rec = reconstruct(views, CFG, psf=bank)
+    assert reconstruct(views, CFG, psf=bank, iterations=1).solver == "rl"
+    rec = reconstruct(views, CFG, psf=bank, solver="hqs")
     assert rec.solver == "hqs" and len(rec.history[0][0]) == 8
     assert rec.image.shape == truth.shape and rec.image.dtype == np.float32
     assert np.isfinite(rec.image).all() and rec.image.min() >= 0
@@ -125,6 +126,8 @@ def test_bad_input(capture, bank):
         reconstruct(views, {"nnum": 15}, psf=bank)
     with pytest.raises(ValueError, match="solver"):
         reconstruct(views, CFG, psf=bank, solver="magic")
+    with pytest.raises(ValueError, match="scan step"):
+        reconstruct(views, CFG.replace(scan=1), psf=bank, solver="hqs")
     with pytest.raises(ValueError, match="scheduler"):
         reconstruct(views, CFG, psf=bank, iterations=1, scheduler="bogus")
     assert np.isfinite(views).all()  # inputs untouched

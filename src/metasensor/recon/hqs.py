@@ -23,6 +23,13 @@ prior fills those directions with edges instead of noise. Measured on simulated 
 0.4) against Richardson–Lucy's 0.516 / 0.671 / 0.646; at 20 dB 0.846 / 0.728 (RL 0.491 / 0.560),
 at 40 dB 0.941 / 0.817 (RL 0.519 / 0.689).
 
+Limitation (measured, not solved): the data weight is tuned on aberration-free banks. Aberrated
+PSFs leave more near-null directions, and the default then under-regularises: a block with
+~1.4 λ r.m.s. (defocus, astigmatism, coma; camera, 30 dB) gives PSNR 14.6 dB at lam_scale 0.3,
+25.4 dB at 0.1, 24.3 dB at 0.03 (Richardson–Lucy 24.0 dB); multisite 4 x 4 blocks with up to
+1.8 λ lost 5.9 dB against one global PSF. Hence Richardson–Lucy stays the default of
+:func:`metasensor.recon.api.reconstruct`.
+
 Data weight: ``lam = lam_scale / sigma²`` on the image normalised to mean 0.5, with the noise
 sigma of the views estimated from the data (:func:`estimate_noise`) unless given. Unobserved
 samples (the padded margins of a window) make the x-step non-circular: it is then solved by
