@@ -30,13 +30,14 @@ PSFs leave more near-null directions, and the default then under-regularises: a 
 1.8 λ lost 5.9 dB against one global PSF. Hence Richardson–Lucy stays the default of
 :func:`metasensor.recon.api.reconstruct`.
 
-Data weight: ``lam = lam_scale / sigma²`` on the image normalised to mean 0.5, with the noise
-sigma of the views estimated from the data (:func:`estimate_noise`) unless given. Unobserved
-samples (the padded margins of a window) make the x-step non-circular: it is then solved by
-conjugate gradients preconditioned with the circular solve (:func:`_pcg`, ``cg`` iterations from
+Data weight: ``lam = lam_scale / sigma² · (d / 3)²`` on the image normalised to mean 0.5 (d the
+scan step: the samples per pixel, V / d², then weigh the same against the prior at every scan),
+with the noise sigma of the views estimated from the data (:func:`estimate_noise`) unless given.
+Unobserved samples (the padded margins of a window) make the x-step non-circular: it is then solved
+by conjugate gradients preconditioned with the circular solve (:func:`_pcg`, ``cg`` iterations from
 the previous x; on a padded chart window 0.917 vs 0.920 for the fully observed problem, where
-filling the margins with the prediction once per beta reached 0.650). The result is clipped at
-zero (flux stays within 1 %: measured 0.996-1.001).
+filling the margins with the prediction once per beta reached 0.650). The result is clipped at zero
+(flux stays within 1 %: measured 0.996-1.001).
 """
 
 from __future__ import annotations
@@ -64,6 +65,7 @@ DEFAULT_BETA_MAX = 4096.0
 DEFAULT_INNER = 3
 DEFAULT_CG = 3
 REG_FLOOR = 1e-4
+REF_STEP = 3  # scan step (px) of the 5 x 5 scan lam_scale was measured on
 
 
 def estimate_noise(data: torch.Tensor, mask: torch.Tensor) -> float:
@@ -146,7 +148,9 @@ def hyper_laplacian_isa(op: PhaseSpaceOperator, psf, data, mask, lam: float | No
     if lam is None:
         sigma = estimate_noise(y, m) if noise is None else float(noise)
         sigma_n = max(sigma / unit, 1e-6 * float(yn[:, m].abs().mean()))
-        lam = lam_scale / sigma_n**2
+        # per image pixel the data hold V / d² samples: keep their weight against the prior's
+        # that of the 5 x 5 scan (d = 3) the default was measured on
+        lam = lam_scale / sigma_n**2 * (op.geometry.d / REF_STEP) ** 2
     if not (lam > 0 and math.isfinite(lam)):
         raise ValueError(f"lam must be positive and finite, got {lam!r}")
     scale = float(nm.matrix.diagonal(dim1=-2, dim2=-1).real.max())
