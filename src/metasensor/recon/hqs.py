@@ -70,8 +70,9 @@ REF_STEP = 3  # scan step (px) of the 5 x 5 scan lam_scale was measured on
 
 def estimate_noise(data: torch.Tensor, mask: torch.Tensor) -> float:
     """Noise r.m.s. of view samples (V, My, Mx), from the median absolute value of their second
-    differences (robust to edges; the views are smooth on their sample grid because each sample
-    integrates a whole lenslet): sigma = 1.4826·MAD / sqrt(6) per axis, the two axes averaged."""
+    differences (the views are smooth on their sample grid because each sample integrates a whole
+    lenslet): sigma = 1.4826·MAD / sqrt(6) per axis, the two axes averaged. Exact on flat views
+    (1.002x); edges only add to it: a dense chart reads 1.1x / 1.75x / 4.2x at 20 / 30 / 40 dB."""
     m = mask.to(torch.bool)
     out = []
     for axis in (0, 1):  # axis of the (My, Mx) sample grid
