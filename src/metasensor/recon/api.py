@@ -267,11 +267,9 @@ def reconstruct(views, cfg: SystemConfig, method: str = "isa", zernike=None, fie
 
         steps = iterations
         if solver == "hqs":
-            from metasensor.recon.fastdeconv import beta_schedule
-            from metasensor.recon.hqs import DEFAULT_BETA_MAX
+            from metasensor.recon.hqs import continuation_steps
 
-            kw = dict(solver_kwargs or {})
-            steps = len(beta_schedule(kw.get("beta0", 1.0), kw.get("beta_max", DEFAULT_BETA_MAX)))
+            steps = continuation_steps(**(solver_kwargs or {}))
         bar = tqdm(total=len(block_list) * steps, desc="reconstruct", unit="it")
     local = scheduler is None or scheduler in ("threads", "sync")
     tick = bar.update if (bar is not None and local) else None

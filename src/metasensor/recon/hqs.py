@@ -51,7 +51,7 @@ from metasensor.recon.forward import PhaseSpaceOperator
 from metasensor.recon.isa import RLResult
 from metasensor.recon.normal import FoldedNormal, difference_weights
 
-__all__ = ["estimate_noise", "hyper_laplacian_isa", "DEFAULT_LAM_SCALE"]
+__all__ = ["estimate_noise", "hyper_laplacian_isa", "continuation_steps", "DEFAULT_LAM_SCALE"]
 
 # lam·sigma² on the mean-0.5 image, sigma from estimate_noise. Measured on simulated captures
 # (192-px chart, camera, astronaut; 20/30/40 dB), SSIM for lam_scale 0.1 / 0.2 / 0.3 / 0.4 / 1:
@@ -86,6 +86,12 @@ def estimate_noise(data: torch.Tensor, mask: torch.Tensor) -> float:
         if vals.numel():
             out.append(float(vals.abs().median()) * 1.4826 / math.sqrt(6.0))
     return float(sum(out) / len(out)) if out else 0.0
+
+
+def continuation_steps(beta0: float = 1.0, beta_max: float = DEFAULT_BETA_MAX, **_) -> int:
+    """Number of betas (residuals, progress ticks) :func:`hyper_laplacian_isa` runs with these
+    keyword arguments (the others are ignored)."""
+    return len(beta_schedule(beta0, beta_max))
 
 
 def _grad(x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
@@ -128,11 +134,11 @@ def hyper_laplacian_isa(op: PhaseSpaceOperator, psf, data, mask, lam: float | No
     """Sparse-gradient ISA (module docstring) of ``data`` (V, My, Mx) observed where ``mask``.
 
     psf : the operator's bank (V, K, K) (for the folded normal operator). lam : data weight on the
-    mean-0.5 image (default ``lam_scale / sigma²``). noise : the views' noise r.m.s. in data units
-    (default: :func:`estimate_noise`). Returns the estimate (Ny, Nx), non-negative, and the
-    relative residual ||y − A x||/||y|| (observed samples) after each beta.
+    mean-0.5 image (default ``lam_scale / sigma² · (d / 3)²``). noise : the views' noise r.m.s.
+    in data units (default: :func:`estimate_noise`). Returns the estimate (Ny, Nx), non-negative,
+    and the relative residual ||y − A x||/||y|| (observed samples) after each beta.
     """
-    if alpha not in (1.0,) and abs(alpha - 2.0 / 3.0) > 1e-9:
+    if alpha != 1.0 and abs(alpha - 2.0 / 3.0) > 1e-9:
         raise ValueError(f"alpha must be 2/3 or 1, got {alpha!r}")
     if inner < 1:
         raise ValueError(f"inner must be >= 1, got {inner}")
