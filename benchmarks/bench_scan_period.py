@@ -15,9 +15,9 @@ Two noise budgets (``budget``): ``per-frame`` — every frame at SNR 30 dB, so a
 SNR is 30 dB − 10·log10(p²/25): 44.0 / 34.4 / 30 / 20.5 dB for p = 1 / 3 / 5 / 15), which isolates
 what the sampling density itself adds.
 
-Two ISA solvers (``solver``): ``rl``, the default Richardson–Lucy (every period), and ``hqs``,
-the sparse-gradient prior (``reconstruct(solver="hqs")``, periods 3, 5, 15; a 1x1 scan would need
-225 x 225 systems per frequency).
+Two ISA solvers (``solver``): ``rl``, Richardson–Lucy (every period), and ``hqs``, the
+sparse-gradient prior (``reconstruct``'s default where it applies: periods 3, 5, 15; a 1x1 scan
+would need 225 x 225 systems per frequency).
 """
 
 from __future__ import annotations

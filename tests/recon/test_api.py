@@ -64,12 +64,18 @@ def test_blocks_no_seams(capture, bank):
 
 
 def test_solver_selection_and_hqs_contract(capture, bank):
-    # Richardson-Lucy by default; solver="hqs" (the sparse-gradient prior) keeps the contract:
-    # shape, float32, finite, non-negative, flux within 1 %, one residual per continuation step;
-    # it fits this smooth, aberration-free scene better than 3 RL iterations.
+    # HQS (the sparse-gradient prior) by default; Richardson-Lucy when its parameters are given
+    # (iterations, subsets), asked for, or the scan step is too coarse for HQS (1 x 1 scan).
+    # HQS keeps the contract: shape, float32, finite, non-negative, flux within 1 %, one residual
+    # per continuation step; it fits this smooth, aberration-free scene better than 3 RL its.
     views, truth = capture
     assert reconstruct(views, CFG, psf=bank, iterations=1).solver == "rl"
-    rec = reconstruct(views, CFG, psf=bank, solver="hqs")
+    assert reconstruct(views, CFG, psf=bank, subsets=1).solver == "rl"
+    lf = CFG.replace(scan=1)
+    assert reconstruct(views[:, :, ::5, ::5], lf, psf=bank).solver == "rl"
+    with pytest.raises(ValueError, match="scan step"):
+        reconstruct(views[:, :, ::5, ::5], lf, psf=bank, solver="hqs")
+    rec = reconstruct(views, CFG, psf=bank)
     assert rec.solver == "hqs" and len(rec.history[0][0]) == 8
     assert rec.image.shape == truth.shape and rec.image.dtype == np.float32
     assert np.isfinite(rec.image).all() and rec.image.min() >= 0

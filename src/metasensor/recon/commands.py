@@ -89,8 +89,9 @@ def register(app: typer.Typer) -> None:
             "its field map initialises DAO, or is used as is with --method isa"),
         blocks: str = typer.Option("1x1", help="multisite blocks, e.g. 4x4"),
         overlap: int = typer.Option(20, help="block overlap in output pixels"),
-        solver: str = typer.Option("rl", help="ISA solver: rl (Richardson-Lucy) | hqs "
-                                   "(sparse-gradient prior; aberration-free data)"),
+        solver: str | None = typer.Option(
+            None, help="ISA solver: hqs (sparse-gradient prior) | rl (Richardson-Lucy); default "
+            "hqs, or rl when --iterations/--subsets is given or the scan step exceeds 5 px"),
         iterations: int | None = typer.Option(None, help="Richardson-Lucy iterations"),
         subsets: int | None = typer.Option(None, help="view subsets per iteration"),
         zernike: str | None = typer.Option(None, help="global aberration, e.g. '4:0.5,7:-0.2'"),
