@@ -135,7 +135,7 @@ def _plot(rows: list[dict], path: Path) -> None:
     ax.set_xticks(PERIODS, [f"{p}x{p}" for p in PERIODS])
     ax.set_xlabel("scan period")
     ax.set_ylabel("SSIM to truth")
-    ax.set_title("ISA quality vs scan period (30 dB per frame / equal light)")
+    ax.set_title("ISA vs scan period (30 dB per frame or equal light)", fontsize=9)
     ax.legend(fontsize=6)
     save_figure(fig, path, dpi=120)
 
