@@ -19,12 +19,15 @@ def capture():
     return views, truth, bank
 
 
-def test_localcluster_equals_local(capture):
-    # Tolerance from the issue: max |diff| <= 1e-5 (same float32 code on the same CPU).
+@pytest.mark.parametrize("solver", ["rl", "hqs"])
+def test_localcluster_equals_local(capture, solver):
+    # Tolerance from the issue: max |diff| <= 1e-5 (same float32 code on the same CPU), for both
+    # ISA solvers (HQS is the default where the scan step allows).
     from distributed import LocalCluster
 
     views, _, bank = capture
-    kw = dict(psf=bank, iterations=3, blocks=(2, 2), overlap=8, view_radius=2.5)
+    kw = dict(psf=bank, blocks=(2, 2), overlap=8, view_radius=2.5, solver=solver,
+              **({"iterations": 3} if solver == "rl" else {}))
     local = reconstruct(views, CFG, **kw).image
     with LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
                       dashboard_address=None) as cluster:
