@@ -141,4 +141,5 @@ def test_model_error_bounds_the_data_weight(bank):
     noise_only = hyper_laplacian_isa(op, bank, y, mask, lam=0.3 / (sigma / unit) ** 2).estimate
     default = hyper_laplacian_isa(op, bank, y, mask).estimate
     rl = richardson_lucy(op, y, mask).estimate
-    assert err(default) < err(rl) < 0.5 < 3.0 < err(noise_only)
+    assert err(default) < err(rl) < 0.5
+    assert err(noise_only) > 3.0
