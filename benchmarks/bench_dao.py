@@ -1,8 +1,12 @@
 """One wave-DAO iteration on a block: seconds, and the ratio to the FFTs it needs (same run).
 
-One iteration = Krishnan–Fergus deconvolution of every used view (113 for the prototype) on the
-pixel grid, their signal-weighted mean, the forward prediction of every view and the sub-pixel
-shift measurement (:class:`metasensor.recon.dao_block.DaoBlock`). PSF regeneration
+One iteration = the intermediate image, the forward prediction of every view and the sub-pixel
+shift measurement (:class:`metasensor.recon.dao_block.DaoBlock`), for both estimators of the
+image: "isa" (the default: the block's phase-space Richardson–Lucy, 5 iterations, 16 subsets; its
+FFT reference counts 5 per-view full-size convolution pairs, as a conventional ISA needs them)
+and "views" (the paper's: Krishnan–Fergus deconvolution of every used view, 113 for the
+prototype, on the pixel grid, and their signal-weighted mean; "isa" makes one iteration per
+update, "views" three). PSF regeneration
 (``view_psfs``, the optics stage, once per three iterations) is timed separately. The FFT
 reference times the real FFTs of the same sizes and counts on the same device: per view 6 β
 steps × (2 forward + 1 inverse) + 1 for the data, 1 inverse for the prediction, 1 inverse for
@@ -32,7 +36,11 @@ sys.path.insert(0, str(HERE.parent / "src"))
 
 
 def _fft_reference(n_views: int, grid: tuple[int, int], view: tuple[int, int], betas: int,
-                   device) -> float:
+                   device, isa_iterations: int = 0) -> float:
+    """Seconds of the FFTs one iteration needs: per view, ``betas`` Krishnan–Fergus steps and the
+    data spectrum (the "views" estimator; betas = 0: none), ``isa_iterations`` forward/adjoint
+    pairs of a per-view full-size convolution (the "isa" estimator, counted as a conventional ISA
+    needs them), then the prediction, the known-region weights and the correlation."""
     import torch
 
     x = torch.randn((min(n_views, 16), *grid), device=device)
@@ -44,8 +52,12 @@ def _fft_reference(n_views: int, grid: tuple[int, int], view: tuple[int, int], b
             s = torch.fft.rfft2(x)
             s2 = torch.fft.rfft2(x)
             x = torch.fft.irfft2(s + s2, s=grid)
-        torch.fft.rfft2(x)  # data spectrum
-        torch.fft.irfft2(torch.fft.rfft2(x), s=grid)  # prediction
+        if betas:
+            torch.fft.rfft2(x)  # data spectrum
+        for _ in range(isa_iterations):
+            x = torch.fft.irfft2(torch.fft.rfft2(x), s=grid)
+        s = torch.fft.rfft2(x)
+        torch.fft.irfft2(s, s=grid)  # prediction
         torch.fft.irfft2(s, s=grid)  # known-region weights of the prediction
         for _ in range(3):  # correlation: two forward, one inverse complex FFT
             torch.fft.fft2(v)
@@ -54,7 +66,7 @@ def _fft_reference(n_views: int, grid: tuple[int, int], view: tuple[int, int], b
     return time.perf_counter() - t0
 
 
-def _iteration(cfg, bank, size: int, dev, rng) -> dict:
+def _iteration(cfg, bank, size: int, dev, rng, estimator: str = "views") -> dict:
     import torch
     from scipy.ndimage import gaussian_filter
 
@@ -71,8 +83,10 @@ def _iteration(cfg, bank, size: int, dev, rng) -> dict:
     blk = DaoBlock(tv, cfg, used, 5e4, 16)
     t0 = time.perf_counter()
     blk.set_psfs(bank)
-    shifts = torch.zeros((tv.shape[0], 2), device=dev)
-    image = blk.estimate(shifts)
+    if estimator == "isa":
+        image = blk.estimate_isa()
+    else:
+        image = blk.estimate(torch.zeros((tv.shape[0], 2), device=dev))
     if dev.type == "cuda":
         torch.cuda.synchronize()
     t_est = time.perf_counter() - t0
@@ -82,11 +96,15 @@ def _iteration(cfg, bank, size: int, dev, rng) -> dict:
         torch.cuda.synchronize()
     t_meas = time.perf_counter() - t0
     total = t_est + t_meas
-    t_fft = _fft_reference(tv.shape[0], blk.shape, (h, h), len(beta_schedule()), dev)
-    return {"block_px": size, "views": int(used.sum()), "device": dev.type,
+    if estimator == "isa":
+        t_fft = _fft_reference(tv.shape[0], blk.shape, (h, h), 0, dev, isa_iterations=5)
+    else:
+        t_fft = _fft_reference(tv.shape[0], blk.shape, (h, h), len(beta_schedule()), dev)
+    return {"estimator": estimator, "block_px": size, "views": int(used.sum()),
+            "device": dev.type,
             "bank_K": int(bank.shape[-1]), "kernel_K": int(blk.kernels.shape[-1]),
             "fft_grid": list(blk.shape), "chunk": blk.chunk, "cached_spectra": blk.otf is not None,
-            "deconv_mean_s": t_est, "shift_measure_s": t_meas, "iteration_s": total,
+            "estimate_s": t_est, "shift_measure_s": t_meas, "iteration_s": total,
             "fft_s": t_fft, "ratio_to_fft": total / t_fft, "threads": torch.get_num_threads()}
 
 
@@ -124,9 +142,11 @@ def run(quick: bool = False) -> list[dict]:
         t0 = time.perf_counter()
         bank = ms.view_psfs(cfg, z, size=k, cache=False)
         t_psf = time.perf_counter() - t0
-        row = {"window": name, "view_psfs_s": t_psf}
-        row.update(_iteration(cfg, bank, 300 if quick else 2000, dev, np.random.default_rng(0)))
-        rows.append(row)
+        for estimator in ("isa", "views"):
+            row = {"window": name, "view_psfs_s": t_psf}
+            row.update(_iteration(cfg, bank, 300 if quick else 2000, dev,
+                                  np.random.default_rng(0), estimator))
+            rows.append(row)
         del bank
     if not quick:
         rows += _accuracy(cfg, z, [("auto", "auto"), ("view_psfs default", None)])

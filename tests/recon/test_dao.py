@@ -265,3 +265,27 @@ def test_block_inside_fractions(rng):
     assert np.abs(pred[:, :6]).max() < 1e-5 and np.abs(pred[:, 6:] - 1).max() < 1e-5
     assert float(blk.reliability(torch.tensor(0.5))) == 0.0
     assert float(blk.reliability(torch.tensor(1.0))) == 1.0
+
+
+def test_block_isa_estimate_is_the_blocks_reconstruction(rng):
+    # DAO's default intermediate image (DaoBlock.estimate_isa) is reconstruct()'s Richardson–Lucy
+    # ISA of the same views with the same PSFs (spiral order, 5 iterations, 16 subsets), on the
+    # same pixel grid, at the views' scale / DaoBlock.scale. float32 rounding: 1e-4 of the peak.
+    # The bank's light lies in its central 5 x 5, so DaoBlock's crop keeps all of it.
+    k = 21
+    bank = np.zeros((15, 15, k, k), np.float32)
+    bank[..., 8:13, 8:13] = rng.random((15, 15, 5, 5)).astype(np.float32)
+    bank /= bank.sum(axis=(2, 3), keepdims=True)
+    views = rng.random((15, 15, 20, 22)).astype(np.float32) + 0.5
+    used = CFG.view_mask()
+    blk = DaoBlock(torch.tensor(views[used]), CFG, used, 5e4, 16)
+    blk.set_psfs(bank)
+    mine = blk.estimate_isa().numpy() * blk.scale
+    ref = ms.reconstruct(views, CFG, method="isa", psf=bank[..., 8:13, 8:13], solver="rl").image
+    assert mine.shape == ref.shape == (60, 66)
+    assert np.abs(mine - ref).max() <= 1e-4 * np.abs(ref).max()
+
+
+def test_dao_estimator_is_checked():
+    with pytest.raises(ValueError, match="estimator"):
+        run_dao(np.ones((15, 15, 16, 16), np.float32), CFG, estimator="mean")

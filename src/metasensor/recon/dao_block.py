@@ -126,7 +126,8 @@ class DaoBlock:
         draw 1 at 0.33 / 0.81 λ. With the precision-weighted fit (``run_dao``'s default) the
         reliability weighting gives 0.111 λ at 10 dB, and on the one 3 λ draw the default misses
         (astronaut, draw 1: 0.306 λ) it ends at 0.255 λ but wanders 0.22-0.34 λ over updates
-        4-8; not adopted without the full ED Fig. 4 re-run."""
+        4-8; not adopted without the full ED Fig. 4 re-run. The paper's estimator
+        (``run_dao(estimator="views")``); the default is :meth:`estimate_isa`."""
         p = self.pad
         hh, ww = self.hw
         acc = torch.zeros((hh, ww), device=self.views.device, dtype=self.views.dtype)
@@ -140,6 +141,46 @@ class DaoBlock:
             acc += (x * self.energy[b, None, None]).sum(0)
         # each deconvolved view estimates I (kernels have unit sum, views carry e_uv·I)
         return (acc / self.energy.sum()).clamp(min=0)
+
+    def estimate_isa(self, iterations: int = 5, subsets: int = 16) -> torch.Tensor:
+        """I = the block's ISA (phase-space Richardson–Lucy, :func:`~metasensor.recon.isa.
+        richardson_lucy`, the authors' spiral view order) of all used views with the current
+        PSFs, on the pixel grid (H, W) at the scale of :meth:`estimate`.
+
+        Not in the paper, whose intermediate image is :meth:`estimate` (the mean of the views'
+        separate deconvolutions). The joint deconvolution resolves what no single view does, so
+        the predictions S_d(I ⊛ H_uv) carry the views' detail and the shifts measured against them
+        are less biased. Measured (240-px block, 3 λ, 30 dB, starting from the *true*
+        aberration): one update moved the estimate 0.035 / 0.059 λ r.m.s. away (astronaut /
+        camera, draw 1) against 0.172 / 0.181 λ with :meth:`estimate` (0.035 / 0.051 λ with the
+        sparse-gradient solver in place of RL: no better, 8x slower). Shifts are not applied:
+        ``run_dao`` measures once per update with it."""
+        from metasensor.recon.forward import PhaseSpaceOperator, make_geometry
+        from metasensor.recon.isa import richardson_lucy, subset_major, view_order
+
+        raster = [(int(u), int(v)) for u, v in zip(*np.nonzero(self.used), strict=True)]
+        pos = {p: i for i, p in enumerate(raster)}
+        order = [pos[p] for p in subset_major(view_order(self.used, "spiral"), subsets)]
+        idx = torch.as_tensor(order, device=self.views.device)
+        psf = (self.kernels * self.energy[:, None, None])[idx]
+        ky, kx = psf.shape[-2:]  # both odd (centred crops), may differ: pad to a square
+        k = max(ky, kx)
+        psf = torch.nn.functional.pad(psf, ((k - kx) // 2, (k - kx) // 2,
+                                            (k - ky) // 2, (k - ky) // 2))
+        h, w = self.views.shape[-2:]
+        geometry = make_geometry((h, w), self.d, psf.shape[-1] // 2, pad=True)
+        op = PhaseSpaceOperator(psf, geometry, device=self.views.device)
+        data = torch.zeros((len(order), *geometry.grid), dtype=torch.float32, device=op.device)
+        mask = torch.zeros(geometry.grid, dtype=torch.bool, device=op.device)
+        sl = geometry.sample_slices()
+        data[:, sl[0], sl[1]] = (self.views[idx] / self.scale).to(torch.float32)
+        mask[sl] = True
+        result = richardson_lucy(op, data, mask, iterations=iterations, subsets=subsets)
+        image = geometry.crop(result.estimate)
+        hh, ww = self.hw
+        if tuple(image.shape) != (hh, ww):
+            raise RuntimeError(f"ISA estimate of shape {tuple(image.shape)}, expected {(hh, ww)}")
+        return image.to(self.views.dtype)
 
     def predict(self, image: torch.Tensor) -> torch.Tensor:
         """S_d(I ⊛ H_uv) for every used view → (B, h, w) (scan-step grid, view scale)."""
