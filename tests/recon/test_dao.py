@@ -289,3 +289,5 @@ def test_block_isa_estimate_is_the_blocks_reconstruction(rng):
 def test_dao_estimator_is_checked():
     with pytest.raises(ValueError, match="estimator"):
         run_dao(np.ones((15, 15, 16, 16), np.float32), CFG, estimator="mean")
+    with pytest.raises(ValueError, match="isa_below"):
+        run_dao(np.ones((15, 15, 16, 16), np.float32), CFG, isa_below=float("nan"))

@@ -8,20 +8,21 @@ Alternate, starting from φ = ``init`` (or 0):
    shifts, never reshaped);
 2. I = Σ_uv e_uv Deconv(V_uv translated by −s_uv, H_uv) / Σ_uv e_uv — Krishnan–Fergus
    deconvolution (α = 2/3, λ = 5e4) of every view, up-sampled from its scan-step grid to the
-   pixel grid; e_uv = Σ H_uv (the views' light, so the mean is weighted by signal);
-   (``estimator="views"``).
+   pixel grid; e_uv = Σ H_uv (the views' light, so the mean is weighted by signal): the
+   paper's estimate (``estimator="views"``);
 
-   Not in the paper (added here; the default, ``estimator="isa"``): I = the block's ISA, the
-   phase-space Richardson–Lucy deconvolution of all views together with the current PSFs
-   (:meth:`DaoBlock.estimate_isa`, 5 iterations, 16 subsets), measured against once per update.
-   The mean of separately deconvolved views lacks the detail only their combination resolves,
-   and its predictions bias the shifts: started from the *true* 3 λ aberration (240-px block,
-   30 dB, draw 1), one update moved the estimate 0.172 / 0.181 λ away with the mean (astronaut /
-   camera) and 0.035 / 0.059 λ with the ISA. From φ = 0, 8 updates: 0.306 → 0.083 λ
-   (astronaut) and 0.220 → 0.095 λ (camera, 5 updates), at a third of the time (102 s vs 287 s;
-   an ISA of the block costs less than the 3 × 113 view deconvolutions of the ``inner`` rounds).
-   1 λ, 3 updates (``tests/recon/test_dao.py`` cases): 0.037 / 0.021 λ against 0.030 / 0.025 λ,
-   5-7 s against 27 s; 10 dB: 0.103 λ.
+   Not in the paper (added here; the default, ``estimator="isa"``): once the last update is
+   below ``isa_below`` (0.5 λ), I = the block's ISA, the phase-space Richardson–Lucy
+   deconvolution of all views together with the current PSFs (:meth:`DaoBlock.estimate_isa`,
+   5 iterations, 16 subsets), measured against once per update. The mean of separately
+   deconvolved views lacks the detail only their combination resolves, and its predictions bias
+   the shifts: started from the *true* 3 λ aberration (240-px block, 30 dB, draw 1), one update
+   moved the estimate 0.172 / 0.181 λ away with the mean (astronaut / camera) and 0.035 /
+   0.059 λ with the ISA. Far from the truth the ISA absorbs part of the error into I, so the
+   shifts under-read it and the loop creeps: ISA from the first update ended camera draw 0 at
+   0.322 λ (updates 0.17, 0.074 < tol, still 0.215 λ after 10 updates), and the six 3 λ draws at
+   0.08-0.32 λ (mean-only: 0.12-0.31 λ); hence the mean for the coarse steps. With the switch
+   at 0.5 λ: camera draw 0 0.111 λ, astronaut draw 1 0.091 λ, camera draw 1 0.083 λ.
 3. s_uv = shift of V_uv against the prediction S_d(I ⊛ H_uv) (sub-sample cross-correlation),
    in image pixels, clipped to ±50 px (the authors' limit);
 
@@ -197,7 +198,8 @@ def run_dao(block_views, cfg: SystemConfig, method: str = "wave", init=None, dev
             lam: float = DEFAULT_LAMBDA, max_shift_px: float = 50.0, modes=DAO_MODES,
             view_mask=None, chunk: int = 16, psf_kw: dict | None = None,
             psf_size: int | str | None = "auto", weigh_views: bool = True,
-            estimator: str = "isa", progress: bool = False) -> DaoResult:
+            estimator: str = "isa", isa_below: float = 0.5,
+            progress: bool = False) -> DaoResult:
     """Wavefront estimation in one block (module docstring); returns a :class:`DaoResult`.
 
     block_views : (nnum, nnum, h, w) the block's views (scan-step grid, any intensity scale).
@@ -212,10 +214,12 @@ def run_dao(block_views, cfg: SystemConfig, method: str = "wave", init=None, dev
         larger and slower); or an odd int. ``psf_kw["size"]`` overrides it.
     weigh_views : weight every view's shift in the Zernike fit by its precision (step 4;
         default); False: all views alike (the paper's plain least squares).
-    estimator : the intermediate image I of step 2: "isa" (default; the block's phase-space
-        Richardson–Lucy with the current PSFs, :meth:`DaoBlock.estimate_isa`; one estimate and
-        one shift measurement per update, ``inner`` unused) or "views" (the paper's mean of the
-        views' Krishnan–Fergus deconvolutions, ``inner`` estimate/measure rounds per update).
+    estimator : the intermediate image I of step 2: "isa" (default) uses the paper's mean (as
+        "views") for the first update and while the last update's r.m.s. exceeds ``isa_below``
+        (waves), then the block's phase-space Richardson–Lucy with the current PSFs
+        (:meth:`DaoBlock.estimate_isa`; one estimate and one measurement per update);
+        ``isa_below=inf`` uses it from the first update. "views": always the paper's mean of
+        the views' Krishnan–Fergus deconvolutions (``inner`` estimate/measure rounds per update).
     """
     if method not in ("wave", "geometric"):
         raise ValueError(f"method must be 'wave' or 'geometric', got {method!r}")
@@ -229,6 +233,8 @@ def run_dao(block_views, cfg: SystemConfig, method: str = "wave", init=None, dev
         raise ValueError("block_views contain NaN or infinite values")
     if estimator not in ("isa", "views"):
         raise ValueError(f"estimator must be 'isa' or 'views', got {estimator!r}")
+    if not isa_below >= 0:
+        raise ValueError(f"isa_below must be a non-negative number of waves, got {isa_below!r}")
     if max_iter < 1 or inner < 1:
         raise ValueError(f"max_iter and inner must be >= 1, got {max_iter}, {inner}")
     if not (psf_size is None or psf_size == "auto"
@@ -284,7 +290,8 @@ def run_dao(block_views, cfg: SystemConfig, method: str = "wave", init=None, dev
     bar = tqdm(total=max_iter, desc=f"DAO ({method})", disable=not progress, leave=False)
     for _ in range(max_iter):
         blk.set_psfs(bank_for(phi))
-        if estimator == "isa":
+        last = history[-1] if history else math.inf  # inf <= isa_below only for isa_below=inf
+        if estimator == "isa" and last <= isa_below:
             image = blk.estimate_isa()
         else:
             s = torch.zeros((views.shape[0], 2), device=dev, dtype=torch.float64)
