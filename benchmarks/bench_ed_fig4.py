@@ -199,10 +199,13 @@ def run(quick: bool = False) -> list[dict]:
     else:
         scenes, levels, draws, size = ("camera", "astronaut"), LEVELS, (0, 1, 2), 150
     # 3 λ: rays reach 110-190 px, more than a 150-px block (measured: wave DAO diverged there,
-    # residual 3.5 λ), hence 240 px. Measured (2 scenes × 3 draws, 8 updates at most): wave DAO
-    # 0.12-0.31 λ residual (5 of 6 ≤ 0.3), PSNR 0.0-0.06 dB under the oracle, 4.3-5.4 dB over
-    # geometric DAO; 1 λ: 0.027-0.056 λ in 3 updates. Before the precision-weighted fit:
-    # 0.33-0.93 λ and 0.041-0.120 λ; before the known-region weights, 3 λ draw 0: 1.92 λ
+    # residual 3.5 λ), hence 240 px. Measured (2 scenes × 3 draws, 8 updates at most; DAO's
+    # default estimator, the block's ISA below 0.5 λ updates): wave DAO 0.083-0.147 λ residual
+    # (6 of 6 ≤ 0.3), PSNR 0.00-0.04 dB under the oracle, 4.3-5.5 dB over geometric DAO,
+    # 81-155 s per draw; 1 λ: 0.029-0.057 λ in 3 updates. With the paper's estimator only
+    # (estimator="views"): 0.12-0.31 λ (5 of 6), 133-410 s, and 0.027-0.056 λ. Before the
+    # precision-weighted fit: 0.33-0.93 λ and 0.041-0.120 λ; before the known-region weights,
+    # 3 λ draw 0: 1.92 λ
     env = os.environ.get("ED_FIG4_LEVELS")  # e.g. "0.5,1": a subset of the levels
     if env:
         levels = tuple(float(v) for v in env.split(","))
