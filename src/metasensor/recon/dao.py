@@ -22,7 +22,8 @@ Alternate, starting from φ = ``init`` (or 0):
    shifts under-read it and the loop creeps: ISA from the first update ended camera draw 0 at
    0.322 λ (updates 0.17, 0.074 < tol, still 0.215 λ after 10 updates), and the six 3 λ draws at
    0.08-0.32 λ (mean-only: 0.12-0.31 λ); hence the mean for the coarse steps. With the switch
-   at 0.5 λ: camera draw 0 0.111 λ, astronaut draw 1 0.091 λ, camera draw 1 0.083 λ.
+   at 0.5 λ (``benchmarks/bench_ed_fig4.py``, 2 scenes × 3 draws): 3 λ 0.083-0.147 λ in
+   81-155 s per draw (mean-only 133-410 s); 1 λ 0.029-0.057 λ in 3 updates.
 3. s_uv = shift of V_uv against the prediction S_d(I ⊛ H_uv) (sub-sample cross-correlation),
    in image pixels, clipped to ±50 px (the authors' limit);
 

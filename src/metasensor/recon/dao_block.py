@@ -124,8 +124,8 @@ class DaoBlock:
         against 0.33-0.93 λ without) but failed at low SNR (1 λ, 10 dB: 0.28 λ against 0.15 λ;
         target 0.2 λ); weighting by the fraction itself kept 0.15 λ at 10 dB but ended 3 λ
         draw 1 at 0.33 / 0.81 λ. With the precision-weighted fit (``run_dao``'s default) the
-        reliability weighting gives 0.111 λ at 10 dB, and on the one 3 λ draw the default misses
-        (astronaut, draw 1: 0.306 λ) it ends at 0.255 λ but wanders 0.22-0.34 λ over updates
+        reliability weighting gives 0.111 λ at 10 dB, and on the one 3 λ draw this estimator alone
+        misses (astronaut, draw 1: 0.306 λ) it ends at 0.255 λ but wanders 0.22-0.34 λ over updates
         4-8; not adopted without the full ED Fig. 4 re-run. The paper's estimator
         (``run_dao(estimator="views")``); the default is :meth:`estimate_isa`."""
         p = self.pad
