@@ -7,11 +7,12 @@ FFT reference counts 5 per-view full-size convolution pairs, as a conventional I
 and "views" (the paper's: Krishnan–Fergus deconvolution of every used view, 113 for the
 prototype, on the pixel grid, and their signal-weighted mean; "isa" makes one iteration per
 update, "views" three). PSF regeneration
-(``view_psfs``, the optics stage, once per three iterations) is timed separately. The FFT
-reference times the real FFTs of the same sizes and counts on the same device: per view 6 β
+(``view_psfs``, the optics stage, once per update) is timed separately. The FFT
+reference times the real FFTs of the same sizes and counts on the same device ("views": per view 6 β
 steps × (2 forward + 1 inverse) + 1 for the data, 1 inverse for the prediction, 1 inverse for
-the known-region weights of the prediction, and the correlation's complex FFTs. Not timed: the
-shift precisions that weight the Zernike fit (once per update, i.e. per three iterations: one
+the known-region weights of the prediction, and the correlation's complex FFTs; "isa": the same
+without the β steps and the data spectrum). Not timed: the
+shift precisions that weight the Zernike fit (once per update: one
 real FFT pair per view on the scan-step grid, 1/9 of the pixel grid's area for a 5×5 scan).
 
 The PSFs are those of a 1 λ r.m.s. random aberration (modes 4–45, seed 0), on two windows: the

@@ -95,3 +95,20 @@ def test_bad_psf_raises():
         PhaseSpaceOperator(bad, g, device="cpu")
     with pytest.raises(ValueError, match="window"):
         make_geometry((0, 4), 3, 1)
+
+
+def test_embed_places_window_samples_and_mask(rng):
+    # Geometry.embed puts window sample (i, j) at domain sample m0 + (i, j), zero elsewhere; the
+    # mask is True exactly there; a sample stack of another shape is refused
+    g = make_geometry((4, 5), 3, 7)
+    s = torch.tensor(rng.random((2, 4, 5)), dtype=torch.float32) + 1.0
+    data, mask = g.embed(s)
+    sy, sx = g.sample_slices()
+    assert data.shape == (2, *g.grid) and mask.shape == g.grid
+    assert torch.equal(data[:, sy, sx], s)
+    assert int(mask.sum()) == 20 and bool(mask[sy, sx].all())
+    outside = data.clone()
+    outside[:, sy, sx] = 0.0
+    assert not bool(outside.any())
+    with pytest.raises(ValueError, match="window"):
+        g.embed(s[:, :3])

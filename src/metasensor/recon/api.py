@@ -165,11 +165,7 @@ def reconstruct_block(task: BlockTask) -> BlockResult:
     data_win = window[rows, cols]
     geometry = make_geometry(data_win.shape[-2:], d, psf.shape[-1] // 2, pad=task.pad)
     op = PhaseSpaceOperator(psf, geometry, device=task.device)
-    data = torch.zeros((len(task.uv), *geometry.grid), dtype=torch.float32, device=op.device)
-    mask = torch.zeros(geometry.grid, dtype=torch.bool, device=op.device)
-    sl = geometry.sample_slices()
-    data[:, sl[0], sl[1]] = torch.from_numpy(data_win).to(op.device)
-    mask[sl] = True
+    data, mask = geometry.embed(torch.from_numpy(data_win).to(op.device))
     if task.solver == "hqs":
         from metasensor.recon.hqs import hyper_laplacian_isa
 

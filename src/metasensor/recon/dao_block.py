@@ -170,17 +170,9 @@ class DaoBlock:
         h, w = self.views.shape[-2:]
         geometry = make_geometry((h, w), self.d, psf.shape[-1] // 2, pad=True)
         op = PhaseSpaceOperator(psf, geometry, device=self.views.device)
-        data = torch.zeros((len(order), *geometry.grid), dtype=torch.float32, device=op.device)
-        mask = torch.zeros(geometry.grid, dtype=torch.bool, device=op.device)
-        sl = geometry.sample_slices()
-        data[:, sl[0], sl[1]] = (self.views[idx] / self.scale).to(torch.float32)
-        mask[sl] = True
+        data, mask = geometry.embed(self.views[idx] / self.scale)
         result = richardson_lucy(op, data, mask, iterations=iterations, subsets=subsets)
-        image = geometry.crop(result.estimate)
-        hh, ww = self.hw
-        if tuple(image.shape) != (hh, ww):
-            raise RuntimeError(f"ISA estimate of shape {tuple(image.shape)}, expected {(hh, ww)}")
-        return image.to(self.views.dtype)
+        return geometry.crop(result.estimate).to(self.views.dtype)
 
     def predict(self, image: torch.Tensor) -> torch.Tensor:
         """S_d(I ⊛ H_uv) for every used view → (B, h, w) (scan-step grid, view scale)."""

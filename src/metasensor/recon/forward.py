@@ -85,6 +85,20 @@ class Geometry:
         return (slice(self.m0[0], self.m0[0] + self.window[0]),
                 slice(self.m0[1], self.m0[1] + self.window[1]))
 
+    def embed(self, samples: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """(V, Sy, Sx) window samples → (V, My, Mx) float32 data on the domain's sample grid
+        (zero where unobserved) and the (My, Mx) bool mask of the observed samples."""
+        if tuple(samples.shape[-2:]) != tuple(self.window):
+            raise ValueError(f"samples must have the window's shape {self.window}, "
+                             f"got {tuple(samples.shape[-2:])}")
+        data = torch.zeros((samples.shape[0], *self.grid), dtype=torch.float32,
+                           device=samples.device)
+        mask = torch.zeros(self.grid, dtype=torch.bool, device=samples.device)
+        sy, sx = self.sample_slices()
+        data[:, sy, sx] = samples.to(torch.float32)
+        mask[sy, sx] = True
+        return data, mask
+
     def crop(self, image: torch.Tensor) -> torch.Tensor:
         """The window's (Sy·d, Sx·d) pixels out of a domain image (..., Ny, Nx)."""
         oy, ox = self.offset
