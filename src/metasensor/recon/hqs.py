@@ -13,7 +13,8 @@ split with auxiliary gradients w and a weight beta raised from ``beta0`` to ``be
     x-step: (AᵀA + (beta/lam)·∇ᵀ∇) x = Aᵀy + (beta/lam)·∇ᵀw
 
 The x-step is exact: AᵀA is block-diagonal in the Fourier domain (:class:`FoldedNormal`), and so
-is ∇ᵀ∇, so it costs two FFTs and a batched d² x d² Cholesky solve (factored once per beta).
+is ∇ᵀ∇, so it costs two FFTs and a batched d² x d² product with the system's inverse (factored
+once per beta).
 
 Why: Richardson–Lucy stops at what the data determine. 70 % of AᵀA's eigenvalues are below
 1e-4 of the largest for a 5 x 5 scan, so at 30 dB even the best *linear* reconstruction reaches
@@ -128,12 +129,12 @@ def _grad_t(wy: torch.Tensor, wx: torch.Tensor) -> torch.Tensor:
     return (torch.roll(wy, 1, 0) - wy) + (torch.roll(wx, 1, 1) - wx)
 
 
-def _pcg(normal, rhs, x, chol, nm: FoldedNormal, iterations: int) -> torch.Tensor:
+def _pcg(normal, rhs, x, inv, nm: FoldedNormal, iterations: int) -> torch.Tensor:
     """Conjugate gradients on ``normal(x) = rhs`` from ``x``, preconditioned by the circular,
-    fully observed system (``nm.solve`` with ``chol``), which differs from it only by the
+    fully observed system (``nm.solve`` with ``inv``), which differs from it only by the
     unobserved samples: a few iterations suffice."""
     r = rhs - normal(x)
-    z = nm.solve(r, chol)
+    z = nm.solve(r, inv)
     p = z
     rz = float(torch.vdot(r.flatten(), z.flatten()))
     for _ in range(iterations):
@@ -144,7 +145,7 @@ def _pcg(normal, rhs, x, chol, nm: FoldedNormal, iterations: int) -> torch.Tenso
         a = rz / pq
         x = x + a * p
         r = r - a * q
-        z = nm.solve(r, chol)
+        z = nm.solve(r, inv)
         rz_new = float(torch.vdot(r.flatten(), z.flatten()))
         p = z + (rz_new / rz) * p if rz > 0 else z
         rz = rz_new
@@ -156,10 +157,10 @@ def _smooth_least_squares(nm: FoldedNormal, aty, normal, reg, weight: float,
     """argmin ||A x − y||²_mask + weight·scale·||∇x||² (scale: AᵀA's largest diagonal), circular
     solve then :data:`INIT_CG` preconditioned CG steps where margins are unobserved; ``normal``
     applies that system with the mask, ``reg`` is its circular regulariser."""
-    chol = nm.factor(weight, reg)
-    x = nm.solve(aty, chol)
+    inv = nm.factor(weight, reg)
+    x = nm.solve(aty, inv)
     if not full:
-        x = _pcg(normal, aty, x, chol, nm, INIT_CG)
+        x = _pcg(normal, aty, x, inv, nm, INIT_CG)
     return x
 
 
@@ -199,7 +200,7 @@ def hyper_laplacian_isa(op: PhaseSpaceOperator, psf, data, mask, lam: float | No
     norm_y = max(float(torch.linalg.vector_norm(yn)), 1e-30)
     aty = op.adjoint(yn)
 
-    def normal_at(mu: float):  # (AᵀMA + mu·L) v, L = ∇ᵀ∇ + floor (what chol factors without M)
+    def normal_at(mu: float):  # (AᵀMA + mu·L) v, L = ∇ᵀ∇ + floor (what factor() inverts without M)
         return lambda v: op.adjoint(op.forward(v) * mf) + mu * (_grad_t(*_grad(v))
                                                                + REG_FLOOR * v)
 
@@ -222,12 +223,12 @@ def hyper_laplacian_isa(op: PhaseSpaceOperator, psf, data, mask, lam: float | No
     history: list[float] = []
     for beta in beta_schedule(beta0, beta_max):
         mu = beta / lam
-        chol = nm.factor(mu / scale, reg)
+        inv = nm.factor(mu / scale, reg)
         normal = normal_at(mu)
         for _ in range(inner):
             gy, gx = _grad(x)
             rhs = aty + mu * _grad_t(solve_w_table(gy, beta, alpha), solve_w_table(gx, beta, alpha))
-            x = nm.solve(rhs, chol) if full else _pcg(normal, rhs, x, chol, nm, cg)
+            x = nm.solve(rhs, inv) if full else _pcg(normal, rhs, x, inv, nm, cg)
         res = (op.forward(x) - yn) * mf
         history.append(float(torch.linalg.vector_norm(res)) / norm_y)
         if progress is not None:

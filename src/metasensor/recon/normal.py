@@ -9,7 +9,8 @@ Hand-written (no library folds a multi-view sampled convolution). For the operat
     fft2(AᵀA x)_i(p, q) = Σ_j G_ij(p, q) X_j(p, q),  G(p, q) = d² Σ_v h_vᴴ h_v   (d² x d²),
 
 so the normal equations split into My·Mx independent d² x d² Hermitian systems: the exact
-regularised least-squares solution costs FFTs plus a batched Cholesky solve. The eigenvalues of
+regularised least-squares solution costs FFTs plus a batched d² x d² product (the inverse,
+from a Cholesky factorisation once per weight). The eigenvalues of
 G(p, q) are the squared singular values of the whole scanning light-field measurement; they show
 what a capture can and cannot resolve (d² aliases against the number of views: a 1 x 1 scan,
 d = 15, has 225 unknowns per frequency for 113 views and a null space; 5 x 5 has 9).
@@ -87,10 +88,15 @@ class FoldedNormal:
         return torch.linalg.eigvalsh(self.matrix)
 
     def factor(self, lam: float, weights: torch.Tensor | None = None) -> torch.Tensor:
-        """Cholesky factors (My, Mx, d², d²) of G + lam·R, R = diag(``weights``) (My, Mx, d²) in
-        the folded layout (default: the identity); ``lam`` is relative to G's largest diagonal.
-        Double precision: G's eigenvalues span ~1e-6..1 (float32 would lose the small ones);
-        batched complex64 LU also hit an MKL argument error for d = 15 (scan 1)."""
+        """The regularised system (G + lam·R)⁻¹ per view frequency, (My, Mx, d², d²) complex128,
+        R = diag(``weights``) (My, Mx, d²) in the folded layout (default: the identity); ``lam``
+        is relative to G's largest diagonal. For :meth:`solve`.
+
+        Cholesky factorisation, then the explicit inverse: applying it is one batched d² x d²
+        product per solve, 3x faster than two triangular solves per frequency at 2,010² px
+        (0.15 s vs 0.45 s on 2 cores, equal to 5e-16). Double precision: G's eigenvalues span
+        ~1e-6..1 (float32 would lose the small ones); batched complex64 LU also hit an MKL
+        argument error for d = 15 (scan 1)."""
         if not lam > 0:
             raise ValueError(f"lam must be > 0, got {lam}")
         scale = float(self.matrix.diagonal(dim1=-2, dim2=-1).real.max())
@@ -98,15 +104,16 @@ class FoldedNormal:
         a = self.matrix.to(torch.complex128)
         a = a + (lam * scale) * torch.diag_embed(w.to(torch.complex128))
         chol, info = torch.linalg.cholesky_ex(a)
+        del a
         if bool((info != 0).any()):
             raise ValueError(f"lam = {lam} is too small to make AᵀA + lam·R positive definite")
-        return chol
+        return torch.cholesky_inverse(chol)
 
-    def solve(self, rhs_image, chol: torch.Tensor) -> torch.Tensor:
-        """(AᵀA + lam·R)⁻¹ rhs on the circular domain, with ``chol`` from :meth:`factor`."""
+    def solve(self, rhs_image, inverse: torch.Tensor) -> torch.Tensor:
+        """(AᵀA + lam·R)⁻¹ rhs on the circular domain, with ``inverse`` from :meth:`factor`."""
         b = self.fold(torch.fft.fft2(torch.as_tensor(rhs_image, dtype=torch.float32,
                                                      device=self.device)))
-        x = torch.cholesky_solve(b.to(torch.complex128).unsqueeze(-1), chol).squeeze(-1)
+        x = torch.matmul(inverse, b.to(torch.complex128).unsqueeze(-1)).squeeze(-1)
         return torch.fft.ifft2(self.unfold(x.to(torch.complex64))).real
 
 
@@ -131,12 +138,12 @@ def tikhonov(normal: FoldedNormal, data, mask, lam: float, smooth: bool = True,
     """
     op = normal.op
     y, m = op.samples_and_mask(data, mask)
-    chol = normal.factor(lam, difference_weights(normal) if smooth else None)  # once
+    inv = normal.factor(lam, difference_weights(normal) if smooth else None)  # once
     mf = m.to(torch.float32)
     y = torch.nan_to_num(y) * mf
     steps = 1 if bool(m.all()) else max(int(outer), 1)
     x = None
     for _ in range(steps):
         full = y if x is None else y + op.forward(x) * (1 - mf)
-        x = normal.solve(op.adjoint(full), chol)
+        x = normal.solve(op.adjoint(full), inv)
     return x
