@@ -80,3 +80,27 @@ def test_subsets_partition():
     assert sorted(i for g in groups for i in g) == list(range(113))
     assert max(map(len, groups)) - min(map(len, groups)) <= 1
     assert len(make_subsets(5, 100)) == 5
+
+
+def test_coarse_scans_default_to_the_simultaneous_update():
+    # A 1 x 1 scan (a view sample every 15 px) defaults to 1 subset, finer scans to 16. On a
+    # simulated 1 x 1 capture (camera, 120 px, 30 dB, library PSFs) the simultaneous update
+    # beats 16 subsets: measured SSIM 0.460 vs 0.377, peak 0.88x vs 1.11x the truth's maximum.
+    from skimage.metrics import structural_similarity
+
+    import metasensor as ms
+    from metasensor.recon.isa import DEFAULT_SUBSETS, default_subsets
+    from metasensor.simulation.scenes import load_scene
+
+    assert default_subsets(3) == default_subsets(5) == DEFAULT_SUBSETS == 16
+    assert default_subsets(15) == 1
+    cap = ms.simulate(load_scene("camera", 134), ms.SystemConfig(scan=1), snr_db=30, seed=0,
+                      comparison=False)
+    t = cap.truth
+    rec = ms.reconstruct(cap.views, cap.config, solver="rl")
+    os16 = ms.reconstruct(cap.views, cap.config, solver="rl", subsets=16)
+    assert rec.subsets == 1 and os16.subsets == 16
+    ssim = [structural_similarity(t, r.image, data_range=float(t.max() - t.min()))
+            for r in (rec, os16)]
+    assert ssim[0] > ssim[1] + 0.04
+    assert rec.image.max() < t.max()

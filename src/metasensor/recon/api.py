@@ -36,7 +36,7 @@ import numpy as np
 
 from metasensor.config import SystemConfig
 from metasensor.recon.blocks import Block, Stitcher, block_zernikes, split_blocks
-from metasensor.recon.isa import DEFAULT_ITERATIONS, DEFAULT_SUBSETS, subset_major, view_order
+from metasensor.recon.isa import DEFAULT_ITERATIONS, default_subsets, subset_major, view_order
 
 __all__ = ["reconstruct", "Reconstruction", "BlockTask", "reconstruct_block"]
 
@@ -208,7 +208,8 @@ def reconstruct(views, cfg: SystemConfig, method: str = "isa", zernike=None, fie
 
     psf : a given (nnum, nnum, K, K) bank for every block (skips PSF generation), or None.
     psf_fn : callable(cfg, zernike (J,), device) -> bank, replacing ``optics.psf.view_psfs``.
-    subsets : view subsets per Richardson–Lucy iteration (1 = simultaneous, n_views = sequential).
+    subsets : view subsets per Richardson–Lucy iteration (1 = simultaneous, n_views = sequential;
+        default 16, or 1 for scan steps above 5 px: :func:`metasensor.recon.isa.default_subsets`).
     solver : "hqs", "rl" or None (module docstring: HQS unless ``iterations``/``subsets`` is
         given or the scan step exceeds 5 px); solver_kwargs : passed to
         :func:`metasensor.recon.hqs.hyper_laplacian_isa` (e.g. ``lam_scale``, ``noise``).
@@ -256,7 +257,7 @@ def reconstruct(views, cfg: SystemConfig, method: str = "isa", zernike=None, fie
     uv = view_order(cfg.view_mask(view_radius), order)
     if not uv:
         raise ValueError(f"no views inside the pupil radius {view_radius!r}")
-    n_subsets = DEFAULT_SUBSETS if subsets is None else int(subsets)
+    n_subsets = default_subsets(d) if subsets is None else int(subsets)
     if n_subsets < 1:
         raise ValueError(f"subsets must be >= 1, got {n_subsets}")
     uv = subset_major(uv, n_subsets)
