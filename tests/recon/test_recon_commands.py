@@ -98,3 +98,18 @@ def test_cli_system_aberration_file_sets_the_field_map(files):
                                    str(files / "psf.h5"), "--system", str(files / "none.h5"),
                                    "--out", str(out)])
     assert res.exit_code != 0 and "not found" in str(res.exception)
+
+
+def test_figure_preview_block_averages_large_fields():
+    # a sensor-sized field (5,985 x 7,905 px) is drawn as its 4 x 4 block means (<= 2,048 px)
+    from metasensor.recon.commands import PREVIEW_PX, _block_mean, _preview_factor
+
+    assert _preview_factor((5985, 7905)) == 4
+    assert max(5985, 7905) // _preview_factor((5985, 7905)) <= PREVIEW_PX
+    assert _preview_factor((300, 400)) == 1
+    img = np.arange(35, dtype=np.float32).reshape(5, 7)
+    np.testing.assert_array_equal(_block_mean(img, 1), img)
+    means = _block_mean(img, 2)  # the last odd row and column are dropped
+    assert means.shape == (2, 3)
+    assert means[0, 0] == pytest.approx((0 + 1 + 7 + 8) / 4)
+    assert means[1, 2] == pytest.approx((18 + 19 + 25 + 26) / 4)

@@ -47,22 +47,39 @@ def write_outputs(out: Path, rec, views) -> list[Path]:
     atomic_write_text(out / "summary.json", json.dumps(summary, indent=1))
     c = rec.config.center
     d = rec.config.scan_step_px
+    f = _preview_factor(image.shape)  # a sensor-sized field is drawn block-averaged
     centre = np.asarray(views[c, c], dtype=np.float32)
     centre = np.kron(centre, np.ones((d, d), np.float32))
+    centre, shown = _block_mean(centre, f), _block_mean(image, f)
     fig, axes = plt.subplots(1, 2, figsize=(10, 5.4), constrained_layout=True)
     for ax, img, title in ((axes[0], centre, f"centre view ({c}, {c}), up-sampled x{d}"),
-                           (axes[1], image, f"ISA reconstruction ({rec.method})")):
+                           (axes[1], shown, f"ISA reconstruction ({rec.method})")):
         lo, hi = np.percentile(img, [0.5, 99.5])
         ax.imshow(img, cmap="gray", vmin=lo, vmax=hi if hi > lo else lo + 1)
         ax.set_title(title)
         ax.set_axis_off()
     for b in rec.blocks[1:] if len(rec.blocks) > 1 else []:
-        y0, y1, x0, x1 = b.core
+        y0, y1, x0, x1 = (e / f for e in b.core)
         axes[1].plot([x0, x1, x1, x0, x0], [y0, y0, y1, y1, y0], lw=0.4, color="tab:orange")
     with atomic_path(out / "reconstruction.png") as tmp:
         fig.savefig(tmp, dpi=120)
     plt.close(fig)
     return [out / n for n in ("image.tif", "zernike.npy", "summary.json", "reconstruction.png")]
+
+
+PREVIEW_PX = 2048  # longest side of the images drawn in reconstruction.png
+
+
+def _preview_factor(shape) -> int:
+    return max(1, -(-max(shape) // PREVIEW_PX))
+
+
+def _block_mean(img: np.ndarray, f: int) -> np.ndarray:
+    """Mean over f x f blocks (the figure's preview of a large field; f = 1: the image)."""
+    if f == 1:
+        return img
+    h, w = (img.shape[0] // f) * f, (img.shape[1] // f) * f
+    return img[:h, :w].reshape(h // f, f, w // f, f).mean(axis=(1, 3))
 
 
 def _parse_blocks(text: str) -> tuple[int, int]:

@@ -1,0 +1,155 @@
+"""A sensor-sized capture streamed from Zarr through multisite blocks into Zarr (issue 5).
+
+The claim measured: ``metasensor reconstruct views.zarr --blocks 8x8 --zarr`` reconstructs the
+prototype's whole field without holding its field of views in memory at once. The views of the
+CMV50000 (7,920 x 6,004 px: 527 x 399 lenslets fully on the sensor at every phase of a 5 x 5
+scan) are ``(15, 15, 1995, 2635)`` float32, 4.7 GB, for a 5,985 x 7,905-px (47.3 MP) image.
+
+The store is written plane by plane (never held whole). Its content is a capture of a periodic
+scene: the astronaut at 315 px (21 lenslets) tiled 3 x 3 is simulated (aberration-free, 5 x 5
+scan), and the noise-free views of its middle tile (105 samples a side, consistent with the
+periodic scene because the PSFs reach far less than a tile) are tiled over the field, plus fresh
+Gaussian noise with the signal-dependent variance a·signal + b fitted to that capture's 30 dB
+photon and read noise (seeded per view), so the store compresses like a real one.
+A child process runs the command (Richardson-Lucy, 5 iterations: issue 5's benchmark setting;
+HQS costs ~21x more, ``bench_isa``) and reports its own peak resident memory. Rows: views bytes
+(logical and on disk), peak RSS and its ratio to the views, wall time, seconds per megapixel,
+and the SSIM of a 4 x 4-tile crop in the middle against the tiled truth, next to the middle tile of
+the 3 x 3-tile capture reconstructed in one piece.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE.parent / "src"))
+
+FULL = {"sensor": (6004, 7920), "blocks": "8x8"}
+QUICK = {"sensor": (1204, 1204), "blocks": "2x2"}
+TILE_PX = 315  # 21 lenslets
+ITERATIONS = 5
+
+_CHILD = """
+import json, resource, sys
+from metasensor.cli import app
+try:
+    app(args=sys.argv[1:], standalone_mode=False)
+finally:
+    print("PEAK_RSS_KB " + str(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss))
+"""
+
+
+def _lenslets(px: int, cfg) -> int:
+    return (px - (cfg.scan - 1) * cfg.scan_step_px) // cfg.nnum
+
+
+def _write_tiled_store(path: Path, small: np.ndarray, shape: tuple[int, int], cfg,
+                       var: tuple[float, float]) -> None:
+    """A (nnum, nnum, *shape) zarr store of ``small`` tiled periodically plus Gaussian noise of
+    variance ``var[0] * signal + var[1]``, one view at a time."""
+    import zarr
+
+    n = small.shape[0]
+    arr = zarr.open_array(str(path), mode="w", shape=(n, n, *shape), dtype="f4",
+                          chunks=(1, 1, 1024, 1024))
+    reps = (-(-shape[0] // small.shape[2]), -(-shape[1] // small.shape[3]))
+    for u in range(n):
+        for v in range(n):
+            rng = np.random.default_rng([u, v])
+            plane = np.tile(small[u, v], reps)[:shape[0], :shape[1]]
+            std = np.sqrt(np.float32(var[0]) * plane + np.float32(var[1]))
+            noise = rng.standard_normal(shape, dtype=np.float32) * std
+            arr[u, v] = np.maximum(plane + noise, 0.0)
+    arr.attrs.update({"metasensor": {"kind": "views", "view_shape": [n, n, *shape],
+                                     "config": cfg.to_dict()}})
+
+
+def _du(path: Path) -> int:
+    return sum(f.stat().st_size for f in path.rglob("*") if f.is_file())
+
+
+def run(quick: bool = False) -> list[dict]:
+    import zarr
+
+    import metasensor as ms
+    from metasensor.metrics import ssim
+    from metasensor.simulation.scenes import load_scene
+
+    case = QUICK if quick else FULL
+    cfg = ms.SystemConfig()
+    d = cfg.scan_step_px
+    scene = np.tile(load_scene("astronaut", TILE_PX), (3, 3))
+    cap = ms.simulate(scene, cfg, snr_db=30.0, seed=0, comparison=False)
+    clean = ms.simulate(scene, cfg, seed=0, comparison=False).views
+    resid2 = ((cap.views - clean) ** 2).ravel()
+    var = np.linalg.lstsq(np.stack([clean.ravel(), np.ones(clean.size)], 1), resid2,
+                          rcond=None)[0]
+    var = (max(float(var[0]), 0.0), max(float(var[1]), 1.0 / 12.0))
+    sigma = float(np.sqrt(resid2.mean()))
+    t = TILE_PX // d  # view samples per tile
+    clean = clean[:, :, t:2 * t, t:2 * t]
+    truth = cap.truth[TILE_PX:2 * TILE_PX, TILE_PX:2 * TILE_PX]
+    shape = tuple(_lenslets(px, cfg) * cfg.scan for px in case["sensor"])
+    image_shape = (shape[0] * d, shape[1] * d)
+    work = Path(tempfile.mkdtemp(prefix="ms-stream-"))
+    try:
+        store = work / "views.zarr"
+        t0 = time.perf_counter()
+        _write_tiled_store(store, clean, shape, cfg, var)
+        write_s = time.perf_counter() - t0
+        out = work / "result"
+        args = ["reconstruct", str(store), "--out", str(out), "--blocks", case["blocks"],
+                "--solver", "rl", "--iterations", str(ITERATIONS), "--zarr"]
+        t0 = time.perf_counter()
+        proc = subprocess.run([sys.executable, "-c", _CHILD, *args], capture_output=True,
+                              text=True, check=False)
+        wall = time.perf_counter() - t0
+        if proc.returncode != 0:
+            raise RuntimeError(f"reconstruct failed: {proc.stderr.strip()[-2000:]}")
+        peak_kb = int(proc.stdout.rsplit("PEAK_RSS_KB", 1)[1].split()[0])
+        summary = json.loads((out / "summary.json").read_text())
+        image = zarr.open_array(str(out / "image.zarr"), mode="r")
+        # a crop of 4 x 4 tiles in the middle, against the tiled truth
+        ty, tx = truth.shape
+        side = min(4 * ty, image_shape[0], image_shape[1]) // ty * ty
+        y0 = (image_shape[0] // 2) // ty * ty - side // 2 // ty * ty
+        x0 = (image_shape[1] // 2) // tx * tx - side // 2 // tx * tx
+        crop = np.asarray(image[y0:y0 + side, x0:x0 + side])
+        tiled = np.tile(truth, (side // ty, side // tx))
+        rng = float(truth.max() - truth.min())
+        alone = ms.reconstruct(cap.views, cfg, solver="rl", iterations=ITERATIONS).image
+        alone = alone[TILE_PX:2 * TILE_PX, TILE_PX:2 * TILE_PX]
+        views_bytes = int(np.prod((cfg.nnum, cfg.nnum, *shape))) * 4
+        row = {"sensor_px": f"{case['sensor'][0]}x{case['sensor'][1]}",
+               "image_px": f"{image_shape[0]}x{image_shape[1]}",
+               "megapixels": image_shape[0] * image_shape[1] / 1e6,
+               "noise_rms": sigma, "noise_var_fit": [round(v, 4) for v in var],
+               "views_gb": views_bytes / 1e9, "store_gb": _du(store) / 1e9,
+               "blocks": case["blocks"], "solver": "rl", "iterations": ITERATIONS,
+               "peak_rss_gb": peak_kb * 1024 / 1e9,
+               "rss_over_views": peak_kb * 1024 / views_bytes,
+               "write_store_s": write_s, "wall_s": wall, "recon_s": summary["seconds"],
+               "s_per_mp": summary["seconds"] / (image_shape[0] * image_shape[1] / 1e6),
+               "finite_nonneg": bool(np.isfinite(crop).all() and crop.min() >= 0),
+               "ssim_crop": ssim(crop, tiled, data_range=rng),
+               "ssim_middle_tile_alone": ssim(alone, truth, data_range=rng)}
+        if not quick:
+            dest = HERE / "results" / "stream_reconstruction.png"
+            shutil.copyfile(out / "reconstruction.png", dest)
+        return [row]
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+
+
+if __name__ == "__main__":  # pragma: no cover
+    for r in run(quick="--quick" in sys.argv):
+        print(r)
