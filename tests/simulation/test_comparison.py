@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 from conftest import SMALL
-from metasensor.simulation.capture import simulate
-from metasensor.simulation.comparison import SegmentedMirror, plain_lightfield
+from metasensor.simulation.capture import plain_lightfield, simulate
+from metasensor.simulation.comparison import SegmentedMirror
 
 
 def _wavefront(x, y):

@@ -1,9 +1,9 @@
 """Simulator: raw meta-imaging captures with known truth, built-in scenes, comparison sensors.
 
-``simulate(scene, cfg, ...) -> Capture`` (capture.py); scene dynamics ``Motion`` (motion.py) and
-``Turbulence`` (turbulence.py); built-in scenes ``load_scene`` (scenes.py); comparison sensors
-(comparison.py: ``SegmentedMirror``, ``plain_lightfield``); a single-lens field-aberration model
-``SingleLens`` (lens.py).
+``simulate(scene, cfg, ...) -> Capture`` and the plain light-field camera of a capture,
+``plain_lightfield`` (capture.py); scene dynamics ``Motion`` (motion.py) and ``Turbulence``
+(turbulence.py); built-in scenes ``load_scene`` (scenes.py); the hardware-AO mirror
+``SegmentedMirror`` (comparison.py); a single-lens field-aberration model ``SingleLens`` (lens.py).
 """
 
 from __future__ import annotations
@@ -13,7 +13,7 @@ import importlib
 _EXPORTS = {
     "simulate": "capture", "Capture": "capture", "Motion": "motion", "Turbulence": "turbulence",
     "load_scene": "scenes", "resolution_chart": "scenes", "checkerboard": "scenes",
-    "SegmentedMirror": "comparison", "plain_lightfield": "comparison", "SingleLens": "lens",
+    "SegmentedMirror": "comparison", "plain_lightfield": "capture", "SingleLens": "lens",
 }
 __all__ = sorted(_EXPORTS)
 

@@ -46,7 +46,7 @@ from metasensor.simulation.noise import NoiseModel, add_noise, apply_noise, meas
 from metasensor.simulation.render import Lattice, sampled_conv
 from metasensor.simulation.turbulence import Turbulence, screen_phase
 
-__all__ = ["Capture", "simulate"]
+__all__ = ["Capture", "simulate", "plain_lightfield"]
 
 
 @dataclass
@@ -326,3 +326,17 @@ def _comparison_sensors(cap: Capture, reference, comps, grid, zernike, field_zer
 def replace(cap: Capture, **changes) -> Capture:
     """A shallow copy of ``cap`` with some fields changed."""
     return dataclasses.replace(cap, **changes)
+
+
+def plain_lightfield(scene, cap, **kwargs):
+    """A plain light-field camera (1 × 1 scan) with the optics, aberrations, dynamics, photon
+    budget (gain, read noise, bit depth) and intensity scale of an existing capture ``cap``.
+
+    Its views sample the field every ``nnum`` pixels; note that its ``truth`` grid starts at
+    sensor pixel 0 (offset ``(nnum − nnum) // 2``), not at ``cap``'s offset.
+    """
+    opts = dict(cap.options)
+    opts.update(scan=1, scan_order=None, scale=cap.scale, snr_db=None,
+                photons=cap.noise.photons, comparison=False)
+    opts.update(kwargs)
+    return simulate(scene, cap.config.replace(scan=cap.config.scan), **opts)

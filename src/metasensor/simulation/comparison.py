@@ -6,7 +6,8 @@
   its segments tiling the square around the pupil, measuring the wavefront perfectly. The residual
   is the wavefront minus its per-segment least-squares piston/tip/tilt fit (paper, Methods). The
   mirror corrects the on-axis (field-centre) wavefront; off-axis field points keep the difference.
-- a plain light-field camera: :func:`plain_lightfield`, the same simulation with a 1 × 1 scan.
+- a plain light-field camera: :func:`metasensor.simulation.capture.plain_lightfield`, the same
+  simulation with a 1 × 1 scan.
 """
 
 from __future__ import annotations
@@ -15,7 +16,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-__all__ = ["SegmentedMirror", "zernike_wavefront", "plain_lightfield"]
+__all__ = ["SegmentedMirror", "zernike_wavefront"]
 
 
 def zernike_wavefront(z) -> Callable[[np.ndarray, np.ndarray], np.ndarray] | None:
@@ -92,19 +93,3 @@ class SegmentedMirror:
         """R.m.s. [waves] of ``wavefront`` over the pupil (piston removed)."""
         w = np.asarray(wavefront(self.x, self.y), dtype=np.float64)[self.inside]
         return float(np.sqrt(np.mean((w - w.mean()) ** 2)))
-
-
-def plain_lightfield(scene, cap, **kwargs):
-    """A plain light-field camera (1 × 1 scan) with the optics, aberrations, dynamics, photon
-    budget (gain, read noise, bit depth) and intensity scale of an existing capture ``cap``.
-
-    Its views sample the field every ``nnum`` pixels; note that its ``truth`` grid starts at
-    sensor pixel 0 (offset ``(nnum − nnum) // 2``), not at ``cap``'s offset.
-    """
-    from metasensor.simulation.capture import simulate
-
-    opts = dict(cap.options)
-    opts.update(scan=1, scan_order=None, scale=cap.scale, snr_db=None,
-                photons=cap.noise.photons, comparison=False)
-    opts.update(kwargs)
-    return simulate(scene, cap.config.replace(scan=cap.config.scan), **opts)
