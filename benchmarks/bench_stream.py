@@ -39,17 +39,13 @@ TILE_PX = 315  # 21 lenslets
 ITERATIONS = 5
 
 _CHILD = """
-import json, resource, sys
+import resource, sys
 from metasensor.cli import app
 try:
     app(args=sys.argv[1:], standalone_mode=False)
 finally:
     print("PEAK_RSS_KB " + str(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss))
 """
-
-
-def _lenslets(px: int, cfg) -> int:
-    return (px - (cfg.scan - 1) * cfg.scan_step_px) // cfg.nnum
 
 
 def _write_tiled_store(path: Path, small: np.ndarray, shape: tuple[int, int], cfg,
@@ -82,6 +78,7 @@ def run(quick: bool = False) -> list[dict]:
 
     import metasensor as ms
     from metasensor.metrics import ssim
+    from metasensor.sensor.realign import lenslet_counts
     from metasensor.simulation.scenes import load_scene
 
     case = QUICK if quick else FULL
@@ -98,7 +95,7 @@ def run(quick: bool = False) -> list[dict]:
     t = TILE_PX // d  # view samples per tile
     clean = clean[:, :, t:2 * t, t:2 * t]
     truth = cap.truth[TILE_PX:2 * TILE_PX, TILE_PX:2 * TILE_PX]
-    shape = tuple(_lenslets(px, cfg) * cfg.scan for px in case["sensor"])
+    shape = tuple(n * cfg.scan for n in lenslet_counts(case["sensor"], cfg))
     image_shape = (shape[0] * d, shape[1] * d)
     work = Path(tempfile.mkdtemp(prefix="ms-stream-"))
     try:
