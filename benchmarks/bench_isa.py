@@ -141,24 +141,33 @@ def _speed_rows(lenslets: int, iterations: int, variants, device) -> list[dict]:
 def _hqs_row(lenslets: int, device) -> dict:
     """The default solver (recon.hqs) on the same problem: wall time, the RL wall time of the
     same run (5 iterations, 16 subsets), and the FFTs it needs: its forward/adjoint calls (each
-    half of an RL iteration's simultaneous FFTs), its folded-normal solves (a complex FFT2 pair
-    of the domain) and the folded normal's build (one complex FFT2 of the domain per view)."""
+    half of an RL iteration's simultaneous FFTs), its folded-normal solves and applies (a complex
+    FFT2 pair of the domain each), the margin bands' forward/adjoint pairs
+    (:mod:`metasensor.recon.masked_normal`: an RL iteration's FFTs on each band's domain), and the
+    folded normal's build (one complex FFT2 of the domain per view)."""
     from metasensor.recon import hqs
     from metasensor.recon.isa import richardson_lucy
+    from metasensor.recon.masked_normal import BandNormal
     from metasensor.recon.normal import FoldedNormal
 
     op, data, mask, _, source, psf = _problem(lenslets, device)
-    counts = {"forward": 0, "adjoint": 0, "solve": 0}
-    orig = {"forward": op.forward, "adjoint": op.adjoint, "solve": FoldedNormal.solve}
+    counts = {"forward": 0, "adjoint": 0, "solve": 0, "apply": 0, "band_normal": 0}
+    orig = {"forward": op.forward, "adjoint": op.adjoint, "solve": FoldedNormal.solve,
+            "apply": FoldedNormal.apply, "band_normal": BandNormal.__call__}
+    band_ops = []
 
     def counted(name, fn):
         def wrapper(*a, **k):
             counts[name] += 1
+            if name == "band_normal" and not band_ops:
+                band_ops.extend(b.op for b in a[0].bands)
             return fn(*a, **k)
         return wrapper
 
     op.forward, op.adjoint = counted("forward", op.forward), counted("adjoint", op.adjoint)
-    FoldedNormal.solve = counted("solve", orig["solve"])
+    for name, owner in (("solve", FoldedNormal), ("apply", FoldedNormal),
+                        ("band_normal", BandNormal)):
+        setattr(owner, "__call__" if name == "band_normal" else name, counted(name, orig[name]))
     try:
         _sync(op.device)
         t0 = time.perf_counter()
@@ -166,7 +175,8 @@ def _hqs_row(lenslets: int, device) -> dict:
         _sync(op.device)
         wall = time.perf_counter() - t0
     finally:
-        FoldedNormal.solve = orig["solve"]
+        FoldedNormal.solve, FoldedNormal.apply = orig["solve"], orig["apply"]
+        BandNormal.__call__ = orig["band_normal"]
         op.forward, op.adjoint = orig["forward"], orig["adjoint"]
     t0 = time.perf_counter()
     richardson_lucy(op, data, mask, iterations=5, subsets=16)
@@ -181,8 +191,10 @@ def _hqs_row(lenslets: int, device) -> dict:
         torch.fft.ifft2(torch.fft.fft2(z))
     _sync(op.device)
     solve_fft = (time.perf_counter() - t0) / 4
-    fft = (0.5 * (counts["forward"] + counts["adjoint"]) * pair + counts["solve"] * solve_fft
-           + op.n_views * solve_fft / 2)
+    band_pair = sum(_fft_times(b, 1, 1)[0] for b in band_ops)
+    fft = (0.5 * (counts["forward"] + counts["adjoint"]) * pair
+           + (counts["solve"] + counts["apply"]) * solve_fft
+           + counts["band_normal"] * band_pair + op.n_views * solve_fft / 2)
     return {"solver": "hqs", "output_px": lenslets * 15, "views": op.n_views,
             "domain": ny, "psf": source, "device": str(op.device), "wall_s": wall,
             "rl_5it_wall_s": rl_wall, "ratio_to_rl": wall / rl_wall, **counts,

@@ -12,7 +12,7 @@ periodic scene because the PSFs reach far less than a tile) are tiled over the f
 Gaussian noise with the signal-dependent variance a·signal + b fitted to that capture's 30 dB
 photon and read noise (seeded per view), so the store compresses like a real one.
 A child process runs the command (Richardson-Lucy, 5 iterations: issue 5's benchmark setting;
-HQS costs ~21x more, ``bench_isa``) and reports its own peak resident memory. Rows: views bytes
+HQS costs ~8x more at 2,010 px, ``bench_isa``) and reports its own peak resident memory. Rows: views bytes
 (logical and on disk), peak RSS and its ratio to the views, wall time, seconds per megapixel,
 and the SSIM of a 4 x 4-tile crop in the middle against the tiled truth, next to the middle tile of
 the 3 x 3-tile capture reconstructed in one piece.

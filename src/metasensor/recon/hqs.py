@@ -23,10 +23,14 @@ prior fills those directions with edges instead of noise. Measured on simulated 
 (inverse-crime free), 30 dB: SSIM 0.907 (chart) / 0.779 (camera) against Richardson–Lucy's
 0.516 / 0.671. Before the start and model-error changes below (not re-measured since): astronaut
 0.793 (lam_scale 0.4, RL 0.646); 20 dB 0.846 / 0.728 (RL 0.491 / 0.560); 40 dB 0.941 / 0.817
-(RL 0.519 / 0.689). Cost: 10.8x Richardson–Lucy's 5 iterations at 300 px (``bench_isa --quick``:
-127 forward, 119 adjoint, 120 folded solves), 14x on the 4 x 4 multisite field (114 s vs 8 s),
-21x at 2,010 x 2,010 px (383 s on 2 cores, 2.6x the FFTs it needs, 6.6 GB peak memory; 444 s
-before the solves used the precomputed inverse). Across scenes and sizes with the contract call
+(RL 0.519 / 0.689). Cost at 2,010 x 2,010 px, 2 cores: 153 s, 8.1x Richardson–Lucy's 5
+iterations (6.8 GB peak memory): 120 folded solves, 118 masked normal products, 9 forward calls.
+The masked normal products go through the folded normal operator and two margin bands
+(:mod:`metasensor.recon.masked_normal`, exact): before, each was a full forward and adjoint, and
+the run took 383 s (21x RL; 444 s before the solves used the precomputed inverse). What remains is
+no longer FFTs (28.6 s of them, ratio 5.4): the d² x d² products, the fold copies and the
+factorisations (2.5 s per beta). Small windows, whose bands would cover > 70 % of the domain, keep
+the direct product (300 px: 7 s, ~20x RL). Across scenes and sizes with the contract call
 (``bench_isa_quality``, 30 dB): chart 0.757 / 0.907 / 0.922 / 0.944 / 0.953 at 105 / 180 / 240 /
 360 / 495 px (its bar periods are fixed in pixels, so a small chart is denser); natural images
 0.66-0.885, where the capture's own noisy 2D sensor reads 0.81-0.90. Non-local means as a
@@ -58,6 +62,7 @@ import torch
 from metasensor.recon.fastdeconv import beta_schedule, solve_w_table
 from metasensor.recon.forward import PhaseSpaceOperator
 from metasensor.recon.isa import RLResult
+from metasensor.recon.masked_normal import masked_normal
 from metasensor.recon.normal import FoldedNormal, difference_weights
 
 __all__ = ["estimate_noise", "hyper_laplacian_isa", "continuation_steps", "DEFAULT_LAM_SCALE"]
@@ -205,9 +210,10 @@ def hyper_laplacian_isa(op: PhaseSpaceOperator, psf, data, mask, lam: float | No
     norm_y = max(float(torch.linalg.vector_norm(yn)), 1e-30)
     aty = op.adjoint(yn)
 
+    data_normal = masked_normal(op, nm, psf, m)  # AᵀMA, cheap on padded windows
+
     def normal_at(mu: float):  # (AᵀMA + mu·L) v, L = ∇ᵀ∇ + floor (what factor() inverts without M)
-        return lambda v: op.adjoint(op.forward(v) * mf) + mu * (_grad_t(*_grad(v))
-                                                               + REG_FLOOR * v)
+        return lambda v: data_normal(v) + mu * (_grad_t(*_grad(v)) + REG_FLOOR * v)
 
     # start from a smooth least-squares estimate (see INIT_REG)
     x = _smooth_least_squares(nm, aty, normal_at(init_reg * scale), reg, init_reg, full)
