@@ -11,8 +11,9 @@ scan), and the noise-free views of its middle tile (105 samples a side, consiste
 periodic scene because the PSFs reach far less than a tile) are tiled over the field, plus fresh
 Gaussian noise with the signal-dependent variance a·signal + b fitted to that capture's 30 dB
 photon and read noise (seeded per view), so the store compresses like a real one.
-A child process runs the command (Richardson-Lucy, 5 iterations: issue 5's benchmark setting;
-HQS costs ~8x more at 2,010 px, ``bench_isa``) and reports its own peak resident memory. Rows: views bytes
+A child process runs the command and reports its own peak resident memory, once per solver:
+Richardson-Lucy, 5 iterations (issue 5's benchmark setting), then the default sparse-gradient
+solver (HQS, ~8x RL's time at 2,010 px: ``bench_isa``). Rows: views bytes
 (logical and on disk), peak RSS and its ratio to the views, wall time, seconds per megapixel,
 and the SSIM of a 4 x 4-tile crop in the middle against the tiled truth, next to the middle tile of
 the 3 x 3-tile capture reconstructed in one piece.
@@ -37,6 +38,7 @@ FULL = {"sensor": (6004, 7920), "blocks": "8x8"}
 QUICK = {"sensor": (1204, 1204), "blocks": "2x2"}
 TILE_PX = 315  # 21 lenslets
 ITERATIONS = 5
+SOLVERS = ("rl", "hqs")  # issue 5's benchmark setting, then the default solver
 
 _CHILD = """
 import resource, sys
@@ -74,10 +76,8 @@ def _du(path: Path) -> int:
 
 
 def run(quick: bool = False) -> list[dict]:
-    import zarr
 
     import metasensor as ms
-    from metasensor.metrics import ssim
     from metasensor.sensor.realign import lenslet_counts
     from metasensor.simulation.scenes import load_scene
 
@@ -103,48 +103,66 @@ def run(quick: bool = False) -> list[dict]:
         t0 = time.perf_counter()
         _write_tiled_store(store, clean, shape, cfg, var)
         write_s = time.perf_counter() - t0
-        out = work / "result"
-        args = ["reconstruct", str(store), "--out", str(out), "--blocks", case["blocks"],
-                "--solver", "rl", "--iterations", str(ITERATIONS), "--zarr"]
-        t0 = time.perf_counter()
-        proc = subprocess.run([sys.executable, "-c", _CHILD, *args], capture_output=True,
-                              text=True, check=False)
-        wall = time.perf_counter() - t0
-        if proc.returncode != 0:
-            raise RuntimeError(f"reconstruct failed: {proc.stderr.strip()[-2000:]}")
-        peak_kb = int(proc.stdout.rsplit("PEAK_RSS_KB", 1)[1].split()[0])
-        summary = json.loads((out / "summary.json").read_text())
-        image = zarr.open_array(str(out / "image.zarr"), mode="r")
-        # a crop of 4 x 4 tiles in the middle, against the tiled truth
-        ty, tx = truth.shape
-        side = min(4 * ty, image_shape[0], image_shape[1]) // ty * ty
-        y0 = (image_shape[0] // 2) // ty * ty - side // 2 // ty * ty
-        x0 = (image_shape[1] // 2) // tx * tx - side // 2 // tx * tx
-        crop = np.asarray(image[y0:y0 + side, x0:x0 + side])
-        tiled = np.tile(truth, (side // ty, side // tx))
-        rng = float(truth.max() - truth.min())
-        alone = ms.reconstruct(cap.views, cfg, solver="rl", iterations=ITERATIONS).image
-        alone = alone[TILE_PX:2 * TILE_PX, TILE_PX:2 * TILE_PX]
-        views_bytes = int(np.prod((cfg.nnum, cfg.nnum, *shape))) * 4
-        row = {"sensor_px": f"{case['sensor'][0]}x{case['sensor'][1]}",
-               "image_px": f"{image_shape[0]}x{image_shape[1]}",
-               "megapixels": image_shape[0] * image_shape[1] / 1e6,
-               "noise_rms": sigma, "noise_var_fit": [round(v, 4) for v in var],
-               "views_gb": views_bytes / 1e9, "store_gb": _du(store) / 1e9,
-               "blocks": case["blocks"], "solver": "rl", "iterations": ITERATIONS,
-               "peak_rss_gb": peak_kb * 1024 / 1e9,
-               "rss_over_views": peak_kb * 1024 / views_bytes,
-               "write_store_s": write_s, "wall_s": wall, "recon_s": summary["seconds"],
-               "s_per_mp": summary["seconds"] / (image_shape[0] * image_shape[1] / 1e6),
-               "finite_nonneg": bool(np.isfinite(crop).all() and crop.min() >= 0),
-               "ssim_crop": ssim(crop, tiled, data_range=rng),
-               "ssim_middle_tile_alone": ssim(alone, truth, data_range=rng)}
-        if not quick:
-            dest = HERE / "results" / "stream_reconstruction.png"
-            shutil.copyfile(out / "reconstruction.png", dest)
-        return [row]
+        rows = [_reconstruct_row(store, work / f"result-{solver}", solver, case, cfg, cap,
+                                 truth, shape, image_shape, write_s, sigma, var)
+                for solver in SOLVERS]
+        return rows
     finally:
         shutil.rmtree(work, ignore_errors=True)
+
+
+def _reconstruct_row(store, out, solver, case, cfg, cap, truth, shape, image_shape, write_s,
+                     sigma, var) -> dict:
+    """Run ``metasensor reconstruct`` on the store in a child process with ``solver`` (RL: 5
+    iterations; HQS: its defaults) and measure it."""
+    import zarr
+
+    import metasensor as ms
+    from metasensor.metrics import ssim
+
+    extra = ["--iterations", str(ITERATIONS)] if solver == "rl" else []
+    args = ["reconstruct", str(store), "--out", str(out), "--blocks", case["blocks"],
+            "--solver", solver, *extra, "--zarr"]
+    t0 = time.perf_counter()
+    proc = subprocess.run([sys.executable, "-c", _CHILD, *args], capture_output=True,
+                          text=True, check=False)
+    wall = time.perf_counter() - t0
+    if proc.returncode != 0:
+        raise RuntimeError(f"reconstruct failed: {proc.stderr.strip()[-2000:]}")
+    peak_kb = int(proc.stdout.rsplit("PEAK_RSS_KB", 1)[1].split()[0])
+    summary = json.loads((out / "summary.json").read_text())
+    image = zarr.open_array(str(out / "image.zarr"), mode="r")
+    # a crop of 4 x 4 tiles in the middle, against the tiled truth
+    ty, tx = truth.shape
+    side = min(4 * ty, image_shape[0], image_shape[1]) // ty * ty
+    y0 = (image_shape[0] // 2) // ty * ty - side // 2 // ty * ty
+    x0 = (image_shape[1] // 2) // tx * tx - side // 2 // tx * tx
+    crop = np.asarray(image[y0:y0 + side, x0:x0 + side])
+    tiled = np.tile(truth, (side // ty, side // tx))
+    rng = float(truth.max() - truth.min())
+    kw = {"iterations": ITERATIONS} if solver == "rl" else {}
+    alone = ms.reconstruct(cap.views, cfg, solver=solver, **kw).image
+    alone = alone[TILE_PX:2 * TILE_PX, TILE_PX:2 * TILE_PX]
+    views_bytes = int(np.prod((cfg.nnum, cfg.nnum, *shape))) * 4
+    row = {"sensor_px": f"{case['sensor'][0]}x{case['sensor'][1]}",
+           "image_px": f"{image_shape[0]}x{image_shape[1]}",
+           "megapixels": image_shape[0] * image_shape[1] / 1e6,
+           "noise_rms": sigma, "noise_var_fit": [round(v, 4) for v in var],
+           "views_gb": views_bytes / 1e9, "store_gb": _du(store) / 1e9,
+           "blocks": case["blocks"], "solver": solver,
+           "iterations": ITERATIONS if solver == "rl" else None,
+           "peak_rss_gb": peak_kb * 1024 / 1e9,
+           "rss_over_views": peak_kb * 1024 / views_bytes,
+           "write_store_s": write_s, "wall_s": wall, "recon_s": summary["seconds"],
+           "s_per_mp": summary["seconds"] / (image_shape[0] * image_shape[1] / 1e6),
+           "finite_nonneg": bool(np.isfinite(crop).all() and crop.min() >= 0),
+           "ssim_crop": ssim(crop, tiled, data_range=rng),
+           "ssim_middle_tile_alone": ssim(alone, truth, data_range=rng)}
+    if case is FULL:
+        dest = HERE / "results" / f"stream_reconstruction_{solver}.png"
+        shutil.copyfile(out / "reconstruction.png", dest)
+    shutil.rmtree(out, ignore_errors=True)
+    return row
 
 
 if __name__ == "__main__":  # pragma: no cover
