@@ -10,8 +10,9 @@ Contract (issue 5)::
 
 Views ``(nnum, nnum, Ly·scan, Lx·scan)`` (NumPy, or a zarr array read block by block) give an
 image ``(Ly·nnum, Lx·nnum)``. The whole prototype sensor (4.7 GB of views in Zarr, 47.3 MP out,
-8 x 8 blocks, Richardson–Lucy 5 iterations) ran at 2.2 GB peak memory in 297 s on 2 cores
-(``benchmarks/bench_stream.py``). Each block gets its own PSF bank from its local aberration
+8 x 8 blocks) ran at 2.0-2.2 GB peak memory in 297-299 s on 2 cores with Richardson–Lucy (5
+iterations) and at 2.6 GB in 1,982 s with the default HQS (``benchmarks/bench_stream.py``).
+Each block gets its own PSF bank from its local aberration
 (``zernike`` everywhere plus ``field_zernike`` at the block), or a given bank (``psf=``);
 ``method="wave"``/``"geometric"`` first estimate the block's aberration with DAO
 (:func:`metasensor.recon.dao.estimate_block_aberration`), then run ISA with it.
