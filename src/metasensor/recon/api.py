@@ -25,8 +25,8 @@ is HQS, unless ``iterations`` or ``subsets`` is given (Richardson–Lucy's param
 step exceeds 5 px. Measured on simulated 192-px captures, 5 x 5 scan, 30 dB: SSIM 0.907 (chart) /
 0.779 (camera) for HQS against 0.516 / 0.671 for RL (the best linear reconstruction on
 model-exact data: 0.56 / 0.66); a ~1.4 λ aberrated block 26.2 dB against 24.0 dB; multisite
-4 x 4 blocks 24.36 dB against 24.11 dB. HQS costs 11-20x RL's 5 iterations at 300-500 px
-and 8.1x at 2,010 px (153 s on 2 cores, 6.8 GB; recon.hqs).
+4 x 4 blocks 24.36 dB against 24.11 dB. HQS costs 21x RL's 5 iterations at 300 px, 10-11x
+at 600-1,000 px and 8.1x at 2,010 px (153 s on 2 cores, 6.8 GB; recon.hqs).
 """
 
 from __future__ import annotations

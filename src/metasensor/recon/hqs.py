@@ -29,8 +29,9 @@ The masked normal products go through the folded normal operator and two margin 
 (:mod:`metasensor.recon.masked_normal`, exact): before, each was a full forward and adjoint, and
 the run took 383 s (21x RL; 444 s before the solves used the precomputed inverse). What remains is
 no longer FFTs (28.6 s of them, ratio 5.4): the d² x d² products, the fold copies and the
-factorisations (2.5 s per beta). Small windows, whose bands would cover > 70 % of the domain, keep
-the direct product (300 px: 7 s, ~20x RL). Across scenes and sizes with the contract call
+factorisations (2.5 s per beta). The gain grows with the window: 300 px 7.0 -> 6.4 s (21x RL),
+600 px 23.2 -> 14.0 s (11x), 1,005 px 67.5 -> 32.3 s (10x); windows whose bands would cover more
+than 70 % of the domain keep the direct product. Across scenes and sizes with the contract call
 (``bench_isa_quality``, 30 dB): chart 0.757 / 0.907 / 0.922 / 0.944 / 0.953 at 105 / 180 / 240 /
 360 / 495 px (its bar periods are fixed in pixels, so a small chart is denser); natural images
 0.66-0.885, where the capture's own noisy 2D sensor reads 0.81-0.90. Non-local means as a

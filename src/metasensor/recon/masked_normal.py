@@ -20,7 +20,9 @@ Cost: the band operators transform ``V`` views on the bands' area instead of the
 2,010² window (5 x 5 scan, 113 views, 45-px PSFs, 2,100² domain) the bands cover 10 % of the
 domain and one call takes 0.37 s (folded product 0.15 s, bands 0.22 s) against 3.1 s for
 ``op.adjoint(op.forward(v) * mask)`` on 2 cores, equal to 3.6e-7 (relative); this made
-:func:`metasensor.recon.hqs.hyper_laplacian_isa` 2.5x faster there (``benchmarks/bench_isa.py``).
+:func:`metasensor.recon.hqs.hyper_laplacian_isa` 2.5x faster there (``benchmarks/bench_isa.py``
+``_hqs_row``; whole solve before / after: 300 px 7.0 / 6.4 s, 600 px 23.2 / 14.0 s, 1,005 px
+67.5 / 32.3 s, 2,010 px 383 / 153 s).
 Where the
 bands would cover more than :data:`MAX_BAND_FRACTION` of the domain (small windows) or the mask is
 not one rectangle, :func:`masked_normal` returns the direct product instead.
