@@ -140,7 +140,7 @@ def one_case(scene_name: str, rms: float, draw: int, size: int, max_iter: int) -
 
 
 def figure(rows: list[dict], path: Path) -> None:
-    from metasensor.report.figures import new_figure, save_figure
+    from metasensor.io.figures import new_figure, save_figure
 
     modes = list(dict.fromkeys(r["mode"] for r in rows))
     fig, axes = new_figure(1, 2, size=(10, 4))

@@ -61,7 +61,7 @@ def run(quick: bool = False) -> list[dict]:
 
 
 def _plot(rows: list[dict], path: Path) -> None:
-    from metasensor.report.figures import new_figure, save_figure
+    from metasensor.io.figures import new_figure, save_figure
 
     fig, axes = new_figure(size=(5.2, 3.6))
     ax = axes[0, 0]

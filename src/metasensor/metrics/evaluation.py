@@ -136,8 +136,8 @@ def write_evaluation(out_dir: str | Path, result: dict, fm: FieldMTF | None = No
                      image=None, truth=None, name: str = "evaluation") -> list[Path]:
     """Write ``<name>.json``, ``<name>.csv`` (per-ROI table), ``<name>.txt`` (summary) and the
     figures (``mtf_curves.png``, ``mtf50_field.png``, ``images.png``) into ``out_dir``."""
+    from metasensor.io.figures import save_panel
     from metasensor.metrics.plots import plot_field_map, plot_mtf_curves
-    from metasensor.report.figures import save_panel
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)

@@ -1,5 +1,5 @@
 """Figures of MTF measurements: curves at several field positions (like the paper's Fig. 2f) and
-a map of MTF50 over the field. Written atomically through :mod:`metasensor.report.figures`."""
+a map of MTF50 over the field. Written atomically through :mod:`metasensor.io.figures`."""
 
 from __future__ import annotations
 
@@ -7,8 +7,8 @@ from pathlib import Path
 
 import numpy as np
 
+from metasensor.io.figures import new_figure, save_figure, save_lines
 from metasensor.metrics.field import FieldMTF
-from metasensor.report.figures import new_figure, save_figure, save_lines
 
 __all__ = ["plot_mtf_curves", "plot_field_map"]
 

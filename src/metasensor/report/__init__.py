@@ -1,1 +1,1 @@
-"""Reports and figures."""
+"""Reports: the demo comparison of the three sensors and its HTML page."""

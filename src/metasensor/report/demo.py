@@ -107,8 +107,8 @@ def run_demo(out: str | Path, settings: DemoSettings | None = None, progress: bo
     from tqdm.auto import tqdm
 
     import metasensor as ms
+    from metasensor.io.figures import save_panel
     from metasensor.metrics import psnr, ssim
-    from metasensor.report.figures import save_panel
     from metasensor.report.html import write_html_report
     from metasensor.simulation.capture import simulate
     from metasensor.simulation.lens import SingleLens

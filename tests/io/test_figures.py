@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from metasensor.report.figures import save_image, save_lines, save_panel
+from metasensor.io.figures import save_image, save_lines, save_panel
 
 PNG = b"\x89PNG\r\n\x1a\n"
 
