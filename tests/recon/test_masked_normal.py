@@ -70,6 +70,6 @@ def test_masked_normal_falls_back_where_bands_do_not_pay():
 
 def test_band_normal_rejects_a_foreign_normal_operator():
     op, _, psf, mask = _problem()
-    other, nm_other, _, _ = _problem(seed=1)
+    _, nm_other, _, _ = _problem(seed=1)
     with pytest.raises(ValueError, match="folded normal operator of op"):
         BandNormal(op, nm_other, psf, (1, 3, 1, 3))

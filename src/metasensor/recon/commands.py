@@ -84,15 +84,17 @@ def _block_mean(img: np.ndarray, f: int) -> np.ndarray:
 def _overlap_matrix(n: int, d: int, f: int) -> np.ndarray:
     """(n·d // f, n) weights: the share of preview pixel i's f pixels that sample s covers when
     up-sampled x d (pixels [s·d, (s+1)·d)), over f."""
-    edges = np.arange(n * d // f + 1) * f
-    lo = np.maximum(edges[:-1, None], np.arange(n)[None] * d)
-    hi = np.minimum(edges[1:, None], np.arange(1, n + 1)[None] * d)
-    return (np.clip(hi - lo, 0, None) / f).astype(np.float32)
+    edges = np.arange(n * d // f + 1, dtype=np.int32) * np.int32(f)
+    starts = np.arange(n + 1, dtype=np.int32) * np.int32(d)
+    width = np.minimum(edges[1:, None], starts[None, 1:]) - np.maximum(edges[:-1, None],
+                                                                      starts[None, :-1])
+    return np.clip(width, 0, None).astype(np.float32) / np.float32(f)
 
 
 def _upsampled_block_mean(view: np.ndarray, d: int, f: int) -> np.ndarray:
     """``_block_mean(np.kron(view, ones((d, d))), f)`` without the d²-times larger intermediate
-    (190 MB for the centre view of the whole sensor): two small overlap products."""
+    (190 MB for the centre view of the whole sensor): two overlap products (their int32 weights
+    ~21 MB each at f = 4)."""
     if f == 1:
         return np.kron(view, np.ones((d, d), np.float32))
     ay = _overlap_matrix(view.shape[0], d, f)

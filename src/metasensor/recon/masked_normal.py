@@ -81,11 +81,11 @@ class _Band:
         self.mask = across[:, None] * keep[None, :] if axis == 0 else keep[:, None] * across[None]
         self.area = self.op.geometry.domain[0] * self.op.geometry.domain[1]
 
-    def apply(self, v: torch.Tensor, out: torch.Tensor) -> None:
-        """out += Eᵀ A_bᵀ M_b A_b E v (E: the band's pixels out of the domain image)."""
+    def apply(self, v: torch.Tensor, out: torch.Tensor, alpha: float = 1.0) -> None:
+        """out += alpha·Eᵀ A_bᵀ M_b A_b E v (E: the band's pixels out of the domain image)."""
         patch = torch.index_select(v, self.axis, self.index)
         back = self.op.adjoint(self.op.forward(patch) * self.mask)
-        out.index_add_(self.axis, self.index, back)
+        out.index_add_(self.axis, self.index, back, alpha=alpha)
 
 
 class BandNormal:
@@ -113,10 +113,9 @@ class BandNormal:
 
     def __call__(self, v: torch.Tensor) -> torch.Tensor:
         out = self.normal.apply(v)
-        corr = torch.zeros_like(out)
         for band in self.bands:
-            band.apply(v, corr)
-        return out - corr
+            band.apply(v, out, alpha=-1.0)
+        return out
 
 
 def masked_normal(op: PhaseSpaceOperator, normal: FoldedNormal, psf, mask: torch.Tensor,
