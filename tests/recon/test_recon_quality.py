@@ -119,7 +119,9 @@ def multisite():
     # A field-dependent aberration (simulated per 4 x 4 field block, up to ~1.8 waves r.m.s. in
     # the corners); ISA in 4 x 4 blocks with the true local aberrations vs one global PSF (the
     # field-mean aberration). A 492-px field: blocks of 123 px. Measured (camera, seed 1, 30 dB),
-    # default solver (sparse-gradient prior): 3.44 dB (24.36 vs 20.91 dB), about 140 s.
+    # default solver (sparse-gradient prior): 3.44 dB (24.36 vs 20.91 dB), about 150 s with a
+    # warm PSF cache; ~540 s in a fresh test session (its private cache starts cold, so the 16
+    # blocks' PSF banks are computed).
     # Richardson-Lucy, gain vs field size: 252 px (63-px blocks, narrower than the PSF windows)
     # 2.78 dB, 372 px 2.99 dB, 492 px 3.27 dB (24.11 vs 20.84 dB).
     import metasensor as ms
