@@ -20,9 +20,9 @@ S = 40  # view samples per side
 
 
 def _ssim(a, b):
-    from skimage.metrics import structural_similarity
+    from metasensor.metrics import ssim
 
-    return structural_similarity(np.asarray(a), np.asarray(b), data_range=1.0)
+    return ssim(np.asarray(b), np.asarray(a), data_range=1.0)
 
 
 @pytest.fixture(scope="module")
