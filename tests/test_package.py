@@ -25,3 +25,30 @@ def test_cli_lists_every_command():
     for cmd in ("psf", "simulate", "calibrate", "realign", "reconstruct", "calibrate-aberration",
                 "motion", "depth", "evaluate", "demo"):
         assert cmd in out, cmd
+
+
+def test_stage_submodules_resolve_as_attributes_in_a_fresh_process():
+    # the README's ``ms.simulation.scenes.load_scene``: lazy packages also resolve submodules
+    code = ("import metasensor as ms\n"
+            "assert callable(ms.simulation.scenes.load_scene)\n"
+            "assert callable(ms.sensor.scan.check_scan_order)\n"
+            "try:\n"
+            "    ms.simulation.no_such_name\n"
+            "except AttributeError as exc:\n"
+            "    assert 'no_such_name' in str(exc)\n"
+            "else:\n"
+            "    raise SystemExit('no AttributeError')\n")
+    subprocess.run([sys.executable, "-c", code], check=True)
+
+
+def test_cli_usage_errors_are_one_line_and_exit_2():
+    cases = (["psf", "--out", "x.h5"], ["no-such-command"], ["demo", "--size", "50"])
+    for args in cases:
+        res = subprocess.run([sys.executable, "-m", "metasensor.cli", *args],
+                             capture_output=True, text=True)
+        lines = [ln for ln in res.stderr.splitlines() if ln.strip()]
+        assert res.returncode == 2, (args, res.returncode)
+        assert len(lines) == 1 and lines[0].startswith("error: "), (args, res.stderr)
+    ok = subprocess.run([sys.executable, "-m", "metasensor.cli", "--help"], capture_output=True,
+                        text=True)
+    assert ok.returncode == 0 and "reconstruct" in ok.stdout

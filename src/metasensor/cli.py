@@ -29,11 +29,27 @@ def main() -> None:
     """Entry point: run the app; bad input exits non-zero with one line naming the problem."""
     import sys
 
+    try:  # typer >= 0.2x vendors click as typer._click; older ones use click itself
+        from typer._click import exceptions as click
+    except ImportError:  # pragma: no cover
+        from click import exceptions as click
+
     try:
-        app()
+        code = app(standalone_mode=False)
+    except click.NoArgsIsHelpError as exc:  # bare group call: the help, as asked
+        typer.echo(exc.ctx.get_help() if exc.ctx is not None else str(exc))
+        code = 0
+    except click.UsageError as exc:  # missing/unknown option or command: one line, no box
+        where = f"{exc.ctx.command_path}: " if exc.ctx is not None else ""
+        typer.echo(f"error: {where}{exc.format_message()}", err=True)
+        sys.exit(2)
+    except typer.Abort:
+        typer.echo("error: aborted", err=True)
+        sys.exit(1)
     except (ValueError, TypeError, FileNotFoundError, OSError) as exc:
         typer.echo(f"error: {exc}", err=True)
         sys.exit(2)
+    sys.exit(code if isinstance(code, int) else 0)
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -10,6 +10,7 @@ their modules are reached through the module: ``metasensor.sensor.realign.realig
 from __future__ import annotations
 
 import importlib
+import importlib.util
 
 _NAMES = {
     "unrealign": "realign", "realign_sequence": "realign",
@@ -26,4 +27,6 @@ def __getattr__(name: str):
     if name in _NAMES:
         module = importlib.import_module(f"metasensor.sensor.{_NAMES[name]}")
         return getattr(module, name)
+    if importlib.util.find_spec(f"metasensor.sensor.{name}") is not None:  # a submodule
+        return importlib.import_module(f"metasensor.sensor.{name}")
     raise AttributeError(f"module 'metasensor.sensor' has no attribute {name!r}")

@@ -9,6 +9,7 @@
 from __future__ import annotations
 
 import importlib
+import importlib.util
 
 _EXPORTS = {
     "simulate": "capture", "Capture": "capture", "Motion": "motion", "Turbulence": "turbulence",
@@ -23,4 +24,6 @@ def __getattr__(name: str):
         value = getattr(importlib.import_module(f"metasensor.simulation.{_EXPORTS[name]}"), name)
         globals()[name] = value
         return value
+    if importlib.util.find_spec(f"metasensor.simulation.{name}") is not None:  # a submodule
+        return importlib.import_module(f"metasensor.simulation.{name}")
     raise AttributeError(f"module 'metasensor.simulation' has no attribute {name!r}")
