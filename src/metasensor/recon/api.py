@@ -63,6 +63,8 @@ class Reconstruction:
     seconds: float
     solver: str = "hqs"  # the ISA solver used: "hqs" or "rl"
     dao_history: list = field(default_factory=list)  # [by][bx] -> DAO history (wave/geometric)
+    # [by][bx] -> r.m.s. view shift (px) measured in each registration round (recon.register)
+    registration: list = field(default_factory=list)
 
 
 @dataclass
@@ -86,6 +88,7 @@ class BlockTask:
     windowed: bool = False  # ``views`` already holds just this block's window
     solver: str = "hqs"  # reconstruct() resolves it (module docstring)
     solver_kwargs: dict = field(default_factory=dict)
+    register: bool = False  # register the views against the bank first (recon.register)
 
 
 @dataclass
@@ -95,6 +98,7 @@ class BlockResult:
     zernike: np.ndarray
     history: list[float]
     dao_history: list[float]
+    registration: list[float] = field(default_factory=list)
 
 
 def _default_psfs(cfg: SystemConfig, zernike, device, size: int | None = None):
@@ -166,6 +170,12 @@ def reconstruct_block(task: BlockTask) -> BlockResult:
     cols = [v for _, v in task.uv]
     psf = bank[rows, cols]
     data_win = window[rows, cols]
+    registration: list[float] = []
+    if task.register:
+        from metasensor.recon.register import register_views
+
+        reg = register_views(psf, data_win, d, device=task.device, pad=task.pad)
+        psf, registration = reg.psf.cpu().numpy(), reg.history
     geometry = make_geometry(data_win.shape[-2:], d, psf.shape[-1] // 2, pad=task.pad)
     op = PhaseSpaceOperator(psf, geometry, device=task.device)
     data, mask = geometry.embed(torch.from_numpy(data_win).to(op.device))
@@ -180,7 +190,7 @@ def reconstruct_block(task: BlockTask) -> BlockResult:
     window_img = geometry.crop(result.estimate).detach().cpu().numpy()
     ry, rx = task.block.region_in_window()
     return BlockResult(task.block, np.ascontiguousarray(window_img[ry, rx], dtype=np.float32),
-                       zernike, result.history, dao_history)
+                       zernike, result.history, dao_history, registration)
 
 
 def _check_views(views, cfg: SystemConfig):
@@ -206,7 +216,8 @@ def reconstruct(views, cfg: SystemConfig, method: str = "isa", zernike=None, fie
                 order: str = "spiral", margin: int | None = None, pad: bool = True,
                 scheduler=None, num_workers: int | None = None, out=None, progress: bool = False,
                 dao_kwargs: dict | None = None, solver: str | None = None,
-                solver_kwargs: dict | None = None) -> Reconstruction:
+                solver_kwargs: dict | None = None, register: bool | None = None
+                ) -> Reconstruction:
     """Reconstruct the image from views (see the module docstring for the contract).
 
     psf : a given (nnum, nnum, K, K) bank for every block (skips PSF generation), or None.
@@ -216,6 +227,9 @@ def reconstruct(views, cfg: SystemConfig, method: str = "isa", zernike=None, fie
     solver : "hqs", "rl" or None (module docstring: HQS unless ``iterations``/``subsets`` is
         given or the scan step exceeds 5 px); solver_kwargs : passed to
         :func:`metasensor.recon.hqs.hyper_laplacian_isa` (e.g. ``lam_scale``, ``noise``).
+    register : register every view against the PSF bank before the solve
+        (:mod:`metasensor.recon.register`: sub-pixel view shifts folded into the bank); None
+        (default): with HQS, whose detail depends on the exact PSFs, not with Richardson–Lucy.
     view_radius : pupil radius (views) of the views used (``cfg.view_mask``; default 113 views).
     order : "spiral" (outside in, the authors'), "radius" (inside out) or "raster".
     margin : pixels of extra view data around each block (default: the PSF radius).
@@ -242,6 +256,8 @@ def reconstruct(views, cfg: SystemConfig, method: str = "isa", zernike=None, fie
         raise ValueError(f"iterations must be >= 0, got {iterations}")
     if solver not in _SOLVERS:
         raise ValueError(f"solver must be one of {_SOLVERS}, got {solver!r}")
+    if register is None:
+        register = solver == "hqs"
     if solver == "hqs" and d > HQS_MAX_STEP:
         raise ValueError(f"solver='hqs' needs a scan step of at most {HQS_MAX_STEP} px "
                          f"(scan >= 3 for nnum 15), got {d} px; use solver='rl'")
@@ -283,11 +299,12 @@ def reconstruct(views, cfg: SystemConfig, method: str = "isa", zernike=None, fie
     ship = not local and isinstance(views, np.ndarray)
     tasks = [BlockTask(b, cfg, _window(views, b, d) if ship else views, uv, zern[b.index], psf,
                        psf_fn, method, iterations, n_subsets, dev, pad, dict(dao_kwargs or {}),
-                       tick, ship, solver, dict(solver_kwargs or {}))
+                       tick, ship, solver, dict(solver_kwargs or {}), bool(register))
              for b in block_list]
     stitcher = Stitcher(shape, out)
     history = [[[] for _ in range(bx)] for _ in range(by)]
     dao_hist = [[[] for _ in range(bx)] for _ in range(by)]
+    reg_hist = [[[] for _ in range(bx)] for _ in range(by)]
     zern_used = zern.copy()
 
     def collect(res: BlockResult) -> None:
@@ -295,6 +312,7 @@ def reconstruct(views, cfg: SystemConfig, method: str = "isa", zernike=None, fie
         iy, ix = res.block.index
         history[iy][ix] = res.history
         dao_hist[iy][ix] = res.dao_history
+        reg_hist[iy][ix] = res.registration
         z = np.asarray(res.zernike, np.float32)
         zern_used[iy, ix, :] = 0
         zern_used[iy, ix, :min(z.size, zern_used.shape[-1])] = z[:zern_used.shape[-1]]
@@ -310,4 +328,4 @@ def reconstruct(views, cfg: SystemConfig, method: str = "isa", zernike=None, fie
         if bar is not None:
             bar.close()
     return Reconstruction(stitcher.out, zern_used, history, block_list, method, cfg, iterations,
-                          n_subsets, time.perf_counter() - t0, solver, dao_hist)
+                          n_subsets, time.perf_counter() - t0, solver, dao_hist, reg_hist)
