@@ -52,3 +52,23 @@ def test_cli_usage_errors_are_one_line_and_exit_2():
     ok = subprocess.run([sys.executable, "-m", "metasensor.cli", "--help"], capture_output=True,
                         text=True)
     assert ok.returncode == 0 and "reconstruct" in ok.stdout
+
+
+def test_cli_commands_refuse_to_overwrite_their_input(tmp_path):
+    from metasensor.io.atomic import refuse_overwrite
+
+    src = tmp_path / "in.tif"
+    src.write_bytes(b"x")
+    refuse_overwrite([tmp_path / "other.tif", None], [src, None])  # different paths: fine
+    import pytest
+
+    with pytest.raises(ValueError, match="would overwrite the input"):
+        refuse_overwrite([tmp_path / "." / "in.tif"], [src])
+    res = subprocess.run([sys.executable, "-m", "metasensor.cli", "motion", str(src), "--out",
+                          str(src)], capture_output=True, text=True)
+    assert res.returncode == 2 and "overwrite the input" in res.stderr
+    assert src.read_bytes() == b"x"
+    res = subprocess.run([sys.executable, "-m", "metasensor.cli", "psf", "--device", "tpu",
+                          "--config", str(src), "--out", str(tmp_path / "p.h5")],
+                         capture_output=True, text=True)
+    assert res.returncode != 0 and len(res.stderr.strip().splitlines()) == 1

@@ -49,6 +49,14 @@ def main() -> None:
     except (ValueError, TypeError, FileNotFoundError, OSError) as exc:
         typer.echo(f"error: {exc}", err=True)
         sys.exit(2)
+    except MemoryError as exc:  # e.g. an absurd --size or aberration: say so, in one line
+        typer.echo(f"error: not enough memory for this request ({exc or 'MemoryError'})",
+                   err=True)
+        sys.exit(2)
+    except RuntimeError as exc:  # corrupt chunks of a store, backend failures: one line
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        typer.echo(f"error: {first}", err=True)
+        sys.exit(1)
     sys.exit(code if isinstance(code, int) else 0)
 
 

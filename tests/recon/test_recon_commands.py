@@ -126,3 +126,36 @@ def test_centre_view_preview_equals_block_mean_of_the_upsampled_view(d, f):
     got = _upsampled_block_mean(view, d, f)
     assert got.shape == ref.shape
     np.testing.assert_allclose(got, ref, rtol=1e-6, atol=1e-6)
+
+
+def test_cli_never_overwrites_its_input_and_leaves_no_partial_zarr(files, tmp_path):
+    runner = CliRunner()
+    views, psf = files / "views.tif", str(files / "psf.h5")
+    before = hashlib.sha256(views.read_bytes()).hexdigest()
+    named = tmp_path / "image.tif"  # a stack named like the result, in the output folder
+    named.write_bytes(views.read_bytes())
+    res = runner.invoke(app, ["reconstruct", str(named), "--psf", psf, "--out", str(tmp_path)])
+    assert res.exit_code != 0 and "overwrite the input" in str(res.exception)
+    assert named.read_bytes() == views.read_bytes()
+    # a bad argument after the zarr target exists: no image.zarr, no temporary left behind
+    out = tmp_path / "o"
+    res = runner.invoke(app, ["reconstruct", str(views), "--psf", psf, "--zarr", "--method",
+                              "nope", "--out", str(out)])
+    assert res.exit_code != 0
+    assert not (out / "image.zarr").exists() and not (out / ".image.zarr.partial").exists()
+    assert hashlib.sha256(views.read_bytes()).hexdigest() == before
+
+
+def test_reconstruct_rejects_dark_or_negative_banks():
+    from metasensor.recon.api import reconstruct
+
+    v = np.ones((5, 5, 12, 12), np.float32)
+    with pytest.raises(ValueError, match="no light"):
+        reconstruct(v, CFG, psf=np.zeros((5, 5, 5, 5), np.float32), iterations=1)
+    with pytest.raises(ValueError, match="non-negative"):
+        reconstruct(v, CFG, psf=-np.ones((5, 5, 5, 5), np.float32), iterations=1)
+    bank = gaussian_psfs(nnum=5, radius=2)
+    tiny = bank - np.float32(1e-6 * bank.max())  # background-subtracted: tiny negatives pass
+    kept = tiny.copy()
+    rec = reconstruct(v, CFG, psf=tiny, iterations=1)
+    assert np.isfinite(rec.image).all() and np.array_equal(tiny, kept)

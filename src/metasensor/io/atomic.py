@@ -11,7 +11,7 @@ import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 
-__all__ = ["atomic_path", "atomic_write_text", "atomic_write_bytes"]
+__all__ = ["atomic_path", "atomic_write_text", "atomic_write_bytes", "refuse_overwrite"]
 
 
 @contextlib.contextmanager
@@ -52,3 +52,13 @@ def atomic_write_text(path: str | Path, text: str) -> Path:
     with atomic_path(path) as tmp:
         tmp.write_text(text)
     return Path(path)
+
+
+def refuse_overwrite(outputs, inputs) -> None:
+    """One-line ``ValueError`` if any output path (file or folder) is one of the inputs: a
+    command must never replace what it reads. ``None`` entries are ignored."""
+    ins = [Path(p) for p in inputs if p is not None]
+    for out in (Path(p) for p in outputs if p is not None):
+        for inp in ins:
+            if out.exists() and inp.exists() and out.resolve() == inp.resolve():
+                raise ValueError(f"output {out} would overwrite the input {inp}")

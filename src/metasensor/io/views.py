@@ -126,5 +126,7 @@ def read_config_from_views(path: str | Path) -> SystemConfig | None:
             meta = json.loads(desc).get("metasensor", {})
         except (json.JSONDecodeError, AttributeError):
             return None
-    cfg = meta.get("config")
+    cfg = meta.get("config") if isinstance(meta, dict) else None
+    if cfg and not isinstance(cfg, dict):
+        raise ValueError(f"{path}: the stored metasensor config is not a table: {cfg!r:.60}")
     return SystemConfig.from_dict(cfg) if cfg else None

@@ -52,9 +52,11 @@ def register(app: typer.Typer) -> None:
         """
         import numpy as np
 
+        from metasensor.io.atomic import refuse_overwrite
         from metasensor.io.views import read_config_from_views, read_views, write_views
         from metasensor.motion.correct import correct_motion_views
 
+        refuse_overwrite([out], [views])
         cfg = read_config_from_views(views) if Path(views).exists() else None
         stack = np.asarray(read_views(views))
         p = period or (cfg.scan if cfg is not None else 0)

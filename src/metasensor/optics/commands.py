@@ -35,8 +35,9 @@ def register(app: typer.Typer) -> None:
         z = parse_zernike(zernike)
         if out.suffix.lower() not in (".h5", ".hdf5"):
             raise ValueError(f"--out must end in .h5 or .hdf5, got {out.name!r}")
-        if out.resolve() == config.resolve():
-            raise ValueError("--out must not overwrite the input config")
+        from metasensor.io.atomic import refuse_overwrite
+
+        refuse_overwrite([out, png], [config])
         bank = view_psfs(cfg, z, depth, subsample=subsample, size=size or None, device=device)
         save_psf(out, bank, cfg, zernike=z, depth=depth, subsample=subsample)
         fig = plot_views(bank, cfg, png or out.with_suffix(".png"), subsample=subsample)

@@ -48,8 +48,9 @@ def evaluate_field_zernike(field_zernike: FieldZernike, yn, xn) -> np.ndarray:
             )
         return out
     grid = np.asarray(field_zernike, dtype=np.float64)
-    if grid.ndim != 3:
-        raise ValueError(f"field_zernike array must have shape (by, bx, J), got {grid.shape}")
+    if grid.ndim != 3 or 0 in grid.shape:
+        raise ValueError(f"field_zernike array must have shape (by, bx, J), none of them 0, "
+                         f"got {grid.shape}")
     if not np.isfinite(grid).all():
         raise ValueError("field_zernike contains NaN or infinite values")
     by, bx, _ = grid.shape

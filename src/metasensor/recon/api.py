@@ -269,6 +269,14 @@ def reconstruct(views, cfg: SystemConfig, method: str = "isa", zernike=None, fie
                              f"got {psf.shape}")
         if not np.isfinite(psf).all():
             raise ValueError("psf contains NaN or infinite values")
+        if float(psf.min()) < -1e-3 * max(float(psf.max()), 0.0):
+            raise ValueError(f"psf must be non-negative (intensities), min {float(psf.min()):.3g}")
+        psf = np.maximum(psf, 0.0)  # a copy: background-subtracted banks keep tiny negatives
+        dark = ~(psf.sum(axis=(2, 3)) > 0) & cfg.view_mask(view_radius)
+        if dark.any():
+            u, v = np.argwhere(dark)[0]
+            raise ValueError(f"psf carries no light in {int(dark.sum())} used view(s), e.g. "
+                             f"({u}, {v}): an all-zero PSF cannot be deconvolved")
     if margin is None:
         margin = psf.shape[-1] // 2 if psf is not None else cfg.nnum
     block_list = split_blocks(shape, (by, bx), d, overlap=overlap, margin=margin)

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import json
+import os
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -43,7 +45,8 @@ def write_outputs(out: Path, rec, views) -> list[Path]:
     summary = {"method": rec.method, "blocks": [len(rec.history), len(rec.history[0])],
                "solver": rec.solver, "iterations": rec.iterations, "subsets": rec.subsets,
                "seconds": rec.seconds,
-               "shape": list(image.shape), "history": rec.history}
+               "shape": list(image.shape), "history": rec.history,
+               "registration_px": getattr(rec, "registration", [])}
     atomic_write_text(out / "summary.json", json.dumps(summary, indent=1))
     c = rec.config.center
     d = rec.config.scan_step_px
@@ -154,6 +157,11 @@ def register(app: typer.Typer) -> None:
             raise ValueError("give either --psf or --config, not both")
         if not views.exists():
             raise FileNotFoundError(f"view stack not found: {views}")
+        from metasensor.io.atomic import refuse_overwrite
+
+        refuse_overwrite([out, *(out / n for n in ("image.tif", "image.zarr", "zernike.npy",
+                                                   "summary.json", "reconstruction.png"))],
+                         [views, psf, config, field_zernike, system])
         bank = None
         cfg = None
         if psf is not None:
@@ -186,13 +194,29 @@ def register(app: typer.Typer) -> None:
             d = cfg.scan_step_px
             shape = (stack.shape[2] * d, stack.shape[3] * d)
             out.mkdir(parents=True, exist_ok=True)
-            target = zarr.open_array(str(out / "image.zarr"), mode="w", shape=shape,
+            # stitched under a temporary name, renamed once complete (a crash or a bad argument
+            # leaves no partial image.zarr)
+            partial = out / ".image.zarr.partial"
+            shutil.rmtree(partial, ignore_errors=True)
+            target = zarr.open_array(str(partial), mode="w", shape=shape,
                                      chunks=(min(1024, shape[0]), min(1024, shape[1])),
                                      dtype="f4", fill_value=0.0)
-        rec = reconstruct(stack, cfg, method=method, zernike=parse_zernike(zernike),
-                          field_zernike=fz, blocks=_parse_blocks(blocks), overlap=overlap,
-                          iterations=iterations, device=device, psf=bank, subsets=subsets,
-                          scheduler=scheduler, progress=True, out=target, solver=solver)
+        try:
+            rec = reconstruct(stack, cfg, method=method, zernike=parse_zernike(zernike),
+                              field_zernike=fz, blocks=_parse_blocks(blocks), overlap=overlap,
+                              iterations=iterations, device=device, psf=bank, subsets=subsets,
+                              scheduler=scheduler, progress=True, out=target, solver=solver)
+        except BaseException:
+            if target is not None:
+                shutil.rmtree(partial, ignore_errors=True)
+            raise
+        if target is not None:
+            final = out / "image.zarr"
+            shutil.rmtree(final, ignore_errors=True)
+            os.replace(partial, final)
+            import zarr
+
+            rec.image = zarr.open_array(str(final), mode="r")
         written = write_outputs(out, rec, stack)
         typer.echo(f"reconstructed {rec.image.shape[0]}x{rec.image.shape[1]} px in "
                    f"{rec.seconds:.1f} s -> {', '.join(str(p) for p in written)}")

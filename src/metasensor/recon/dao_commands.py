@@ -49,6 +49,9 @@ def register(app: typer.Typer) -> None:
 
         if not capture.exists():
             raise FileNotFoundError(f"capture not found: {capture}")
+        from metasensor.io.atomic import refuse_overwrite
+
+        refuse_overwrite([out, out.with_suffix(".png") if figure else None], [capture, config])
         if iterations < 1:
             raise ValueError(f"--iterations must be >= 1, got {iterations}")
         if not 0.0 < threshold < 1.0:

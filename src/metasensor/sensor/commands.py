@@ -57,6 +57,9 @@ def calibrate_cmd(
     from metasensor.sensor.calibrate import calibrate, flat_field
 
     cfg = _config(config, scan)
+    from metasensor.io.atomic import refuse_overwrite
+
+    refuse_overwrite([out], [white, config])
     with open_raw(white) as raw:
         pages = len(raw)
         period = cfg.scan if scan is not None else (int(round(pages**0.5)) if pages > 1 else 1)
