@@ -27,6 +27,12 @@ step exceeds 5 px. Measured on simulated 192-px captures, 5 x 5 scan, 30 dB: SSI
 model-exact data: 0.56 / 0.66); a ~1.4 λ aberrated block 26.2 dB against 24.0 dB; multisite
 4 x 4 blocks 24.36 dB against 24.11 dB. HQS costs 21x RL's 5 iterations at 300 px, 10-11x
 at 600-1,000 px and 8.1x at 2,010 px (153 s on 2 cores, 6.8 GB; recon.hqs).
+
+Before HQS every block's views are registered against its bank (``register``, default on with
+HQS; :mod:`metasensor.recon.register`): sub-pixel view shifts, which a defocus or aberration error
+of the bank causes, are measured and folded into the PSFs. A 0.1 λ defocus error took HQS from
+SSIM 0.907 to 0.313 (chart, 192 px, 30 dB); registered 0.874. ``Reconstruction.registration``
+holds the r.m.s. shift of each round per block.
 """
 
 from __future__ import annotations

@@ -15,12 +15,22 @@ Why: the sparse-gradient solver (:mod:`metasensor.recon.hqs`) resolves detail th
 only through the exact PSFs, so it is fragile where the bank is slightly wrong. Such errors shift
 views: a 0.05 λ r.m.s. defocus error already moves the outer views by ~0.8 px (measured here:
 0.64 px r.m.s. over the 113 views), which is what an object 0.05 λ off the assumed focus, or an
-aberration estimate that far off, gives. Measured (192-px chart, 30 dB, aberration-free capture,
-bank with a defocus error; HQS SSIM without / with registration): 0 λ 0.907 / 0.907 (shifts
-0.017 px r.m.s.), 0.05 λ 0.690 / 0.850, 0.1 λ 0.313 / 0.796, 0.2 λ 0.643 / 0.665; Richardson–Lucy
-alone 0.516 / 0.500 / 0.474 / 0.457. What registration cannot fix is the change of the PSFs'
-shape (the residual after registration) and shifts that vary within a block (depth edges): see
-``benchmarks/bench_isa_mismatch.py``.
+aberration estimate that far off, gives. Measured (``benchmarks/bench_isa_mismatch.py``: 192-px
+captures, aberration-free, 30 dB; the bank with a defocus error of 0 / 0.025 / 0.05 / 0.1 /
+0.2 λ; HQS SSIM with / without registration):
+
+* chart 0.907 / 0.907, 0.898 / 0.888, 0.886 / 0.690, 0.874 / 0.313, 0.839 / 0.643
+  (Richardson–Lucy 0.516, 0.511, 0.500, 0.474, 0.457);
+* camera 0.779 / 0.779, 0.778 / 0.768, 0.777 / 0.714, 0.767 / 0.530, 0.758 / 0.571
+  (Richardson–Lucy 0.671, 0.668, 0.659, 0.636, 0.628).
+
+Rounds measured 0.43 -> 0.067 -> 0.004 px r.m.s. (0.05 λ) and 1.73 -> 0.037 -> 0.002 px (0.2 λ);
+a right bank reads 0.014-0.036 px and stops after one or two rounds. Cost: one Richardson–Lucy
+(5 iterations) per round, +40-75 % of HQS's time at 192 px. The 384-px demo (``make demo``) moved
+from SSIM 0.816 to 0.830, and its 4 x 4 variant, whose blocks sit between the simulator's 3 x 3
+field samples, from PSNR 11.0 dB to 17.0 dB. What registration cannot fix is the change of
+the PSFs' shape beyond a shift and shifts that vary within a block (depth edges, a field
+aberration that changes across the block).
 """
 
 from __future__ import annotations
