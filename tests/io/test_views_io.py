@@ -41,3 +41,21 @@ def test_bad_inputs(tmp_path):
     tifffile.imwrite(tmp_path / "five.tif", np.zeros((5, 4, 4), np.float32))
     with pytest.raises(ValueError, match="not nnum"):
         read_views(tmp_path / "five.tif", nnum=3)
+
+
+def test_zarr_write_over_a_plain_file_fails_cleanly_and_bad_metadata_is_named(tmp_path):
+    cfg = ms.SystemConfig(nnum=3, scan=3)
+    target = tmp_path / "v.zarr"
+    target.write_text("not a store")
+    with pytest.raises(ValueError, match="not a Zarr store"):
+        write_views(target, np.zeros((3, 3, 4, 4), np.float32), cfg)
+    assert target.read_text() == "not a store"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["v.zarr"]  # no temporary left
+    bad = tmp_path / "bad.tif"
+    tifffile.imwrite(bad, np.zeros((9, 4, 4), np.float32), photometric="minisblack",
+                     description='{"metasensor": "x"}', metadata=None)
+    assert read_config_from_views(bad) is None
+    tifffile.imwrite(bad, np.zeros((9, 4, 4), np.float32), photometric="minisblack",
+                     description='{"metasensor": {"config": "x"}}', metadata=None)
+    with pytest.raises(ValueError, match="not a table"):
+        read_config_from_views(bad)

@@ -57,3 +57,11 @@ def test_demo_default_edge_mtf50_gain(tmp_path):
     # measured 12.6 dB, SSIM 0.453; with 16 subsets it reached -3.7 dB (pixels at 166x the peak)
     plain = rows["plain light field (1x1 scan)"]
     assert plain["psnr_db"] > 10.0 and plain["ssim"] < meta["ssim"]
+
+
+@pytest.mark.parametrize("settings", [DemoSettings(scan=2), DemoSettings(snr_db=float("nan")),
+                                      DemoSettings(blocks=(0, 0))])
+def test_demo_rejects_impossible_settings_before_writing_anything(tmp_path, settings):
+    with pytest.raises(ValueError):
+        run_demo(tmp_path / "out", settings, progress=False)
+    assert not (tmp_path / "out").exists()

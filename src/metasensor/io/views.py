@@ -59,14 +59,20 @@ def _write_zarr(path: Path, views: np.ndarray, meta: dict) -> Path:
     if tmp.exists():
         shutil.rmtree(tmp)
     n = views.shape[0]
-    arr = zarr.open_array(str(tmp), mode="w", shape=views.shape, dtype=views.dtype,
-                          chunks=(1, 1, min(1024, views.shape[2]), min(1024, views.shape[3])))
-    for u in range(n):
-        arr[u] = views[u]
-    arr.attrs.update(meta)
-    if path.exists():
-        shutil.rmtree(path)
-    tmp.rename(path)
+    try:
+        arr = zarr.open_array(str(tmp), mode="w", shape=views.shape, dtype=views.dtype,
+                              chunks=(1, 1, min(1024, views.shape[2]), min(1024, views.shape[3])))
+        for u in range(n):
+            arr[u] = views[u]
+        arr.attrs.update(meta)
+        if path.is_dir():
+            shutil.rmtree(path)
+        elif path.exists():
+            raise ValueError(f"{path} exists and is not a Zarr store (a folder): not replaced")
+        tmp.rename(path)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)  # no half-written store left behind
+        raise
     return path
 
 

@@ -253,9 +253,13 @@ def plot_wavefront_map(sa: SystemAberration, path: str | Path, truth=None) -> Pa
                     ax.set_title(name, fontsize=8, loc="left")
     fig.colorbar(im, ax=axes, shrink=0.6, label="waves")
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    from metasensor.io.atomic import atomic_path
+
+    try:
+        with atomic_path(path) as tmp:
+            fig.savefig(tmp, format="png", dpi=110)
+    finally:
+        plt.close(fig)
     return path
 
 
@@ -277,7 +281,11 @@ def plot_convergence(histories: dict[str, list[float]], path: str | Path,
     ax.grid(alpha=0.3)
     fig.tight_layout()
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    from metasensor.io.atomic import atomic_path
+
+    try:
+        with atomic_path(path) as tmp:
+            fig.savefig(tmp, format="png", dpi=110)
+    finally:
+        plt.close(fig)
     return path

@@ -12,6 +12,7 @@ slanted-edge MTF50 at the field centre and edge.
 from __future__ import annotations
 
 import json
+import math
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -116,6 +117,11 @@ def run_demo(out: str | Path, settings: DemoSettings | None = None, progress: bo
     from metasensor.simulation.scenes import load_scene
 
     s = settings or DemoSettings()
+    SystemConfig(scan=s.scan)  # an impossible scan period fails here, before any output exists
+    if not math.isfinite(s.snr_db):
+        raise ValueError(f"snr_db must be a finite number of dB, got {s.snr_db!r}")
+    if min(s.blocks) < 1 or min(s.field_blocks) < 1:
+        raise ValueError(f"blocks must be >= 1 each, got {s.blocks} / {s.field_blocks}")
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     t_start = time.perf_counter()
