@@ -25,6 +25,7 @@ included: about 53 s of CPU time on one core.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -115,6 +116,17 @@ def estimate_depth(views, cfg: SystemConfig, calibration=None, *, candidates: in
         raise TypeError(f"cfg must be a SystemConfig, got {type(cfg).__name__}")
     arr = _check_views(views, cfg)
     n, c = cfg.nnum, cfg.center
+    for name, value, low in (("radius", radius, 1), ("refine_iterations", refine_iterations, 0),
+                             ("fill_radius", fill_radius, 1), ("candidates", candidates, 2)):
+        if not (isinstance(value, int | np.integer) and value >= low):
+            raise ValueError(f"{name} must be an integer >= {low}, got {value!r}")
+    if not (isinstance(eps, int | float) and math.isfinite(eps) and eps > 0):
+        raise ValueError(f"eps must be a positive number, got {eps!r}")
+    if disparity_range is not None and (np.shape(disparity_range) != (2,)
+                                        or not np.isfinite(disparity_range).all()
+                                        or disparity_range[0] >= disparity_range[1]):
+        raise ValueError(f"disparity_range must be (low, high) with low < high, "
+                         f"got {disparity_range!r}")
     h, w = arr.shape[2:]
     mask = cfg.view_mask() if view_mask is None else np.asarray(view_mask, dtype=bool)
     if mask.shape != (n, n):

@@ -267,6 +267,9 @@ def reconstruct(views, cfg: SystemConfig, method: str = "isa", zernike=None, fie
     if solver == "hqs" and d > HQS_MAX_STEP:
         raise ValueError(f"solver='hqs' needs a scan step of at most {HQS_MAX_STEP} px "
                          f"(scan >= 3 for nnum 15), got {d} px; use solver='rl'")
+    if min(views.shape[2:]) < 4:
+        raise ValueError(f"views of {tuple(views.shape[2:])} samples are too small to "
+                         "reconstruct (at least 4 x 4)")
     shape = (views.shape[2] * d, views.shape[3] * d)
     if psf is not None:
         psf = np.asarray(psf, dtype=np.float32)

@@ -238,6 +238,13 @@ def run_dao(block_views, cfg: SystemConfig, method: str = "wave", init=None, dev
         raise ValueError(f"isa_below must be a non-negative number of waves, got {isa_below!r}")
     if max_iter < 1 or inner < 1:
         raise ValueError(f"max_iter and inner must be >= 1, got {max_iter}, {inner}")
+    for name, value in (("lam", lam), ("tol", tol), ("max_shift_px", max_shift_px)):
+        if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
+            raise ValueError(f"{name} must be a positive number, got {value!r}")
+    if not (isinstance(chunk, int | np.integer) and chunk >= 1):
+        raise ValueError(f"chunk must be a positive integer, got {chunk!r}")
+    if np.iscomplexobj(v):
+        raise ValueError(f"block_views must be real, got dtype {v.dtype}")
     if not (psf_size is None or psf_size == "auto"
             or (isinstance(psf_size, int | np.integer) and psf_size > 0 and psf_size % 2)):
         raise ValueError(f"psf_size must be 'auto', None or a positive odd int, got {psf_size!r}")

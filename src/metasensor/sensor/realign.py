@@ -157,6 +157,11 @@ def unrealign(views, cfg: SystemConfig, scan_order=None, moving: str = "mla",
         raise ValueError(f"views must have shape ({n}, {n}, H, W), got {views.shape}")
     if views.shape[2] % p or views.shape[3] % p or views.shape[2] == 0 or views.shape[3] == 0:
         raise ValueError(f"view size {views.shape[2:]} is not a multiple of the scan period {p}")
+    if views.dtype.kind not in "biuf":
+        raise ValueError(f"views must be real numbers (bool, integer or float), got dtype "
+                         f"{views.dtype}")
+    if np.issubdtype(views.dtype, np.floating) and not np.isfinite(views).all():
+        raise ValueError("views contain NaN or infinite values")
     ly, lx = views.shape[2] // p, views.shape[3] // p
     if frame_shape is None:
         frame_shape = (ly * n + margin, lx * n + margin)

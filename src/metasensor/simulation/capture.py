@@ -26,6 +26,7 @@ pixel).
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -193,7 +194,14 @@ def simulate(scene, cfg: SystemConfig, zernike=None, field_zernike=None, depth=N
     if ly < 1 or lx < 1:
         raise ValueError(f"scene {shape} holds no lenslet over a {p}x{p} scan "
                          f"(needs at least {n + (p - 1) * d} px per side)")
+    if scan is not None and not (isinstance(scan, int | np.integer) and scan >= 1):
+        raise ValueError(f"scan must be a positive integer period, got {scan!r}")
+    if scale is not None and not (isinstance(scale, int | float | np.floating)
+                                  and math.isfinite(scale) and scale > 0):
+        raise ValueError(f"scale must be a positive number of DN per scene unit, got {scale!r}")
     if zernike is not None:
+        if np.ndim(zernike) != 1:
+            raise ValueError(f"zernike must be a 1-D Noll vector, got shape {np.shape(zernike)}")
         zernike = np.asarray(zernike, dtype=np.float64).ravel()
         if not np.isfinite(zernike).all():
             raise ValueError("zernike contains NaN or infinite values")
