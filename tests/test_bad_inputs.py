@@ -50,3 +50,19 @@ def test_dao_parameters(kw, match):
 def test_reconstruct_needs_a_few_samples():
     with pytest.raises(ValueError, match="too small"):
         ms.reconstruct(np.ones((15, 15, 1, 1), np.float32), ms.SystemConfig())
+
+
+@pytest.mark.parametrize("kw, match", [({"scatter": "x"}, "scatter"),
+                                       ({"threshold": float("nan")}, "threshold"),
+                                       ({"chunk": 0}, "chunk"),
+                                       ({"flow_view": "middle"}, "flow_view"),
+                                       ({"flow_view": (20, 20)}, "flow_view")])
+def test_motion_options(kw, match):
+    from metasensor.motion.correct import correct_motion_views
+
+    views = np.ones((5, 5, 60, 60), np.float32)
+    with pytest.raises(ValueError, match=match):
+        correct_motion_views(views, None, **kw)
+    if "chunk" not in kw and "flow_view" not in kw:
+        with pytest.raises(ValueError, match=match):
+            ms.correct_motion(views[2, 2], None, **kw)

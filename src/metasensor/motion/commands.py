@@ -59,6 +59,10 @@ def register(app: typer.Typer) -> None:
         refuse_overwrite([out], [views])
         cfg = read_config_from_views(views) if Path(views).exists() else None
         stack = np.asarray(read_views(views))
+        if period < 0:
+            raise ValueError(f"--period must be positive, got {period}")
+        if cfg is not None and period and period != cfg.scan:
+            raise ValueError(f"--period {period} differs from the stack's scan period {cfg.scan}")
         p = period or (cfg.scan if cfg is not None else 0)
         order = parse_scan_order(scan_order, p)
         if flow_view in ("centre", "center"):

@@ -15,6 +15,7 @@ non-rigid registration.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterator, Sequence
 
 import numpy as np
@@ -52,6 +53,17 @@ def _resolve(scan_order, reference, shape) -> tuple[list[tuple[int, int]], int, 
         raise ValueError(f"view of shape {shape} is too small for scan period {p} "
                          f"(needs at least {12 * p} x {12 * p})")
     return order, p, int(ref)
+
+
+def _check_options(scatter: str, threshold: float, smooth: float, method: str) -> None:
+    """One-line errors for impossible options, before any flow is computed."""
+    if scatter not in ("linear", "cubic"):
+        raise ValueError(f"scatter must be 'linear' or 'cubic', got {scatter!r}")
+    if method not in ("dis", "farneback", "registration"):
+        raise ValueError(f"method must be 'dis', 'farneback' or 'registration', got {method!r}")
+    for name, value in (("threshold", threshold), ("smooth", smooth)):
+        if not (isinstance(value, int | float) and math.isfinite(value) and value >= 0):
+            raise ValueError(f"{name} must be a non-negative number, got {value!r}")
 
 
 def _check_image(img, name: str) -> np.ndarray:
@@ -184,6 +196,7 @@ def correct_motion(view_image: np.ndarray, scan_order: Sequence | str | None,
     (skips the flow). Returns ``(H, W)`` float32; static regions are returned unchanged.
     """
     view = _check_image(view_image, "view_image")
+    _check_options(scatter, threshold, smooth, method)
     order, p, ref = _resolve(scan_order, reference, view.shape)
     if motion is None:
         motion = estimate_motion(view, order, ref, method=method, threshold=threshold,
@@ -223,6 +236,14 @@ def correct_motion_views(views: np.ndarray, scan_order: Sequence, reference: int
     if not np.all(np.isfinite(views)):
         raise ValueError("views contain NaN or infinite values")
     n, _, h, w = views.shape
+    _check_options(scatter, threshold, smooth, method)
+    if not (isinstance(chunk, int | np.integer) and chunk >= 1):
+        raise ValueError(f"chunk must be a positive integer, got {chunk!r}")
+    if isinstance(flow_view, str) and flow_view != "sharpest":
+        raise ValueError(f"flow_view must be None, 'sharpest' or (u, v), got {flow_view!r}")
+    if isinstance(flow_view, tuple | list) and not (
+            len(flow_view) == 2 and all(0 <= int(a) < n for a in flow_view)):
+        raise ValueError(f"flow_view {flow_view!r} is not a view of the {n} x {n} stack")
     order, p, ref = _resolve(scan_order, reference, (h, w))
     out = views.astype(np.float32, copy=True)
     flat = out.reshape(n * n, h, w)
