@@ -70,7 +70,6 @@ from metasensor.backend import as_tensor, resolve_device, to_numpy
 from metasensor.config import SystemConfig
 from metasensor.recon.dao_block import DaoBlock
 from metasensor.recon.fastdeconv import DEFAULT_LAMBDA
-from metasensor.recon.shifts import fourier_shift
 from metasensor.recon.wavefront import (
     DAO_MODES,
     fit_shifts,
@@ -156,22 +155,18 @@ def _psf_bank(cfg: SystemConfig, zernike, amplitude, device, psf_kw) -> np.ndarr
 
 def geometric_psfs(ideal: np.ndarray, shifts: np.ndarray) -> np.ndarray:
     """Aberration-free PSFs ``(n, n, K, K)`` translated by ``shifts (n, n, 2)`` pixels (y, x)
-    (Fourier shift, after padding K to hold the largest shift) → ``(n, n, K', K')``, K' odd."""
+    (Fourier shift, after padding K to hold the largest shift; every view keeps its energy;
+    :func:`metasensor.recon.register.translate_psfs`) → ``(n, n, K', K')``, K' odd."""
+    from metasensor.recon.register import translate_psfs
+
     h = np.asarray(ideal, dtype=np.float32)
     s = np.asarray(shifts, dtype=np.float64)
     n, _, k, _ = h.shape
     if s.shape != (n, n, 2):
         raise ValueError(f"shifts must have shape ({n}, {n}, 2), got {s.shape}")
-    pad = int(math.ceil(np.abs(s).max())) + 2 if s.size else 0
-    t = torch.as_tensor(np.pad(h, ((0, 0), (0, 0), (pad, pad), (pad, pad))))
-    out = fourier_shift(t.reshape(n * n, k + 2 * pad, k + 2 * pad),
-                        torch.as_tensor(s.reshape(n * n, 2), dtype=torch.float32))
-    out = out.clamp(min=0).reshape(n, n, k + 2 * pad, k + 2 * pad)
-    # keep the light: renormalise every view to its original energy
-    e0 = h.sum(axis=(2, 3))
-    e1 = to_numpy(out.sum(dim=(2, 3)))
-    scale = np.where(e1 > 0, e0 / np.maximum(e1, 1e-30), 0.0)
-    return (to_numpy(out) * scale[:, :, None, None]).astype(np.float32)
+    out = translate_psfs(torch.as_tensor(h.reshape(n * n, k, k)),
+                         torch.as_tensor(s.reshape(n * n, 2)))
+    return to_numpy(out).reshape(n, n, *out.shape[-2:]).astype(np.float32)
 
 
 def block_psfs(cfg: SystemConfig, result: DaoResult, amplitude=None, device=None,
