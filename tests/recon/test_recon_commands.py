@@ -45,6 +45,7 @@ def test_reconstruct_cli_writes_image_and_figure(files):
     assert (out / "reconstruction.png").stat().st_size > 1000
     summary = json.loads((out / "summary.json").read_text())
     assert summary["blocks"] == [2, 2] and len(summary["history"][0][0]) == 2
+    assert summary["registration_px"] == [[[], []], [[], []]]  # Richardson-Lucy: no registration
     assert np.load(out / "zernike.npy").shape == (2, 2, 45)
     import zarr
 

@@ -46,7 +46,7 @@ def write_outputs(out: Path, rec, views) -> list[Path]:
                "solver": rec.solver, "iterations": rec.iterations, "subsets": rec.subsets,
                "seconds": rec.seconds,
                "shape": list(image.shape), "history": rec.history,
-               "registration_px": getattr(rec, "registration", [])}
+               "registration_px": rec.registration}
     atomic_write_text(out / "summary.json", json.dumps(summary, indent=1))
     c = rec.config.center
     d = rec.config.scan_step_px
@@ -132,6 +132,9 @@ def register(app: typer.Typer) -> None:
         solver: str | None = typer.Option(
             None, help="ISA solver: hqs (sparse-gradient prior) | rl (Richardson-Lucy); default "
             "hqs, or rl when --iterations/--subsets is given or the scan step exceeds 5 px"),
+        register_views: bool | None = typer.Option(
+            None, "--register/--no-register",
+            help="register the views against the PSF bank first (default: with hqs)"),
         iterations: int | None = typer.Option(None, help="Richardson-Lucy iterations"),
         subsets: int | None = typer.Option(None, help="view subsets per iteration"),
         zernike: str | None = typer.Option(None, help="global aberration, e.g. '4:0.5,7:-0.2'"),
@@ -205,7 +208,8 @@ def register(app: typer.Typer) -> None:
             rec = reconstruct(stack, cfg, method=method, zernike=parse_zernike(zernike),
                               field_zernike=fz, blocks=_parse_blocks(blocks), overlap=overlap,
                               iterations=iterations, device=device, psf=bank, subsets=subsets,
-                              scheduler=scheduler, progress=True, out=target, solver=solver)
+                              scheduler=scheduler, progress=True, out=target, solver=solver,
+                              register=register_views)
         except BaseException:
             if target is not None:
                 shutil.rmtree(partial, ignore_errors=True)
