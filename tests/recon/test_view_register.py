@@ -81,19 +81,39 @@ def capture():
 def test_registration_rescues_hqs_from_a_defocus_error(capture):
     # the bank assumes 0.1 λ r.m.s. of defocus the capture does not have (outer views ~1.6 px
     # off). Measured at 150 px: HQS SSIM 0.889 with the right bank; with the wrong one 0.36
-    # unregistered and 0.86 registered (the default).
+    # unregistered (the default) and 0.86 registered.
     cap = capture
     t = cap.truth
     rng = float(t.max() - t.min())
     z = np.zeros(15)
     z[3] = 0.1
-    right = ms.reconstruct(cap.views, cap.config)
-    wrong = ms.reconstruct(cap.views, cap.config, zernike=z, register=False)
-    fixed = ms.reconstruct(cap.views, cap.config, zernike=z)
+    right = ms.reconstruct(cap.views, cap.config, register=True)
+    wrong = ms.reconstruct(cap.views, cap.config, zernike=z)  # the default: no registration
+    fixed = ms.reconstruct(cap.views, cap.config, zernike=z, register=True)
     s_right, s_wrong, s_fixed = (ssim(r.image, t, data_range=rng) for r in (right, wrong, fixed))
     assert s_fixed > s_wrong + 0.2, (s_wrong, s_fixed)
     assert s_fixed > s_right - 0.06, (s_right, s_fixed)
     assert right.registration[0][0][0] < 0.05  # the right bank: nothing to register
-    assert fixed.registration[0][0][0] > 0.4 and fixed.registration[0][0][-1] < 0.05
-    rl = ms.reconstruct(cap.views, cap.config, zernike=z, solver="rl")
-    assert rl.registration == [[[]]]  # Richardson–Lucy does not register by default
+    assert fixed.registration[0][0][0] > 0.4 and fixed.registration[0][0][-1] < 0.1
+    assert wrong.registration == [[[]]]
+
+
+def test_registration_rejects_shifts_that_do_not_lower_the_misfit(bank, monkeypatch):
+    # the views follow the bank exactly; a (forced) wrong shift measurement of 2 px per view
+    # raises the misfit, so the candidate is rejected and the bank kept
+    import metasensor.recon.register as reg_mod
+
+    s = 30
+    g = make_geometry((s, s), 3, bank.shape[-1] // 2, pad=True)
+    op = PhaseSpaceOperator(bank, g, device="cpu")
+    clean = op.forward(torch.from_numpy(resolution_chart(g.domain[0])))
+    oy, ox = g.m0
+    window = clean[:, oy:oy + s, ox:ox + s]
+    gen = torch.Generator().manual_seed(1)
+    wrong = 2.0 / 3.0 * torch.randn((bank.shape[0], 2), generator=gen, dtype=torch.float64)
+    monkeypatch.setattr(reg_mod, "measure_shifts_torch", lambda *a, **k: wrong)
+    reg = register_views(bank, window, 3, device="cpu", rounds=3)
+    assert len(reg.history) == 1 and len(reg.misfits) == 2
+    assert reg.misfits[1] > reg.misfits[0]
+    assert float(torch.linalg.vector_norm(reg.shifts)) == 0.0
+    assert torch.equal(reg.psf, bank)

@@ -28,11 +28,12 @@ model-exact data: 0.56 / 0.66); a ~1.4 λ aberrated block 26.2 dB against 24.0 d
 4 x 4 blocks 24.36 dB against 24.11 dB. HQS costs 21x RL's 5 iterations at 300 px, 10-11x
 at 600-1,000 px and 8.1x at 2,010 px (153 s on 2 cores, 6.8 GB; recon.hqs).
 
-Before HQS every block's views are registered against its bank (``register``, default on with
-HQS; :mod:`metasensor.recon.register`): sub-pixel view shifts, which a defocus or aberration error
-of the bank causes, are measured and folded into the PSFs. A 0.1 λ defocus error took HQS from
-SSIM 0.907 to 0.313 (chart, 192 px, 30 dB); registered 0.874. ``Reconstruction.registration``
-holds the r.m.s. shift of each round per block.
+With ``register=True`` every block's views are first registered against its bank
+(:mod:`metasensor.recon.register`): sub-pixel view shifts, which a defocus or aberration error of
+the bank causes, are measured and folded into the PSFs where they lower the misfit. A 0.1 λ
+defocus error took HQS from SSIM 0.907 to 0.313 (chart, 192 px, 30 dB); registered 0.874. Off by
+default: on the true banks of strongly aberrated multisite blocks it measured spurious shifts.
+``Reconstruction.registration`` holds the r.m.s. shift of each round per block.
 """
 
 from __future__ import annotations
@@ -222,7 +223,7 @@ def reconstruct(views, cfg: SystemConfig, method: str = "isa", zernike=None, fie
                 order: str = "spiral", margin: int | None = None, pad: bool = True,
                 scheduler=None, num_workers: int | None = None, out=None, progress: bool = False,
                 dao_kwargs: dict | None = None, solver: str | None = None,
-                solver_kwargs: dict | None = None, register: bool | None = None
+                solver_kwargs: dict | None = None, register: bool = False
                 ) -> Reconstruction:
     """Reconstruct the image from views (see the module docstring for the contract).
 
@@ -234,8 +235,9 @@ def reconstruct(views, cfg: SystemConfig, method: str = "isa", zernike=None, fie
         given or the scan step exceeds 5 px); solver_kwargs : passed to
         :func:`metasensor.recon.hqs.hyper_laplacian_isa` (e.g. ``lam_scale``, ``noise``).
     register : register every view against the PSF bank before the solve
-        (:mod:`metasensor.recon.register`: sub-pixel view shifts folded into the bank); None
-        (default): with HQS, whose detail depends on the exact PSFs, not with Richardson–Lucy.
+        (:mod:`metasensor.recon.register`: sub-pixel view shifts folded into the bank, kept only
+        where they lower the misfit); for banks that may be off (a defocus or aberration error):
+        HQS's detail depends on the exact PSFs. Default False.
     view_radius : pupil radius (views) of the views used (``cfg.view_mask``; default 113 views).
     order : "spiral" (outside in, the authors'), "radius" (inside out) or "raster".
     margin : pixels of extra view data around each block (default: the PSF radius).
@@ -262,8 +264,6 @@ def reconstruct(views, cfg: SystemConfig, method: str = "isa", zernike=None, fie
         raise ValueError(f"iterations must be >= 0, got {iterations}")
     if solver not in _SOLVERS:
         raise ValueError(f"solver must be one of {_SOLVERS}, got {solver!r}")
-    if register is None:
-        register = solver == "hqs"
     if solver == "hqs" and d > HQS_MAX_STEP:
         raise ValueError(f"solver='hqs' needs a scan step of at most {HQS_MAX_STEP} px "
                          f"(scan >= 3 for nnum 15), got {d} px; use solver='rl'")

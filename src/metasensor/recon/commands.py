@@ -132,9 +132,9 @@ def register(app: typer.Typer) -> None:
         solver: str | None = typer.Option(
             None, help="ISA solver: hqs (sparse-gradient prior) | rl (Richardson-Lucy); default "
             "hqs, or rl when --iterations/--subsets is given or the scan step exceeds 5 px"),
-        register_views: bool | None = typer.Option(
-            None, "--register/--no-register",
-            help="register the views against the PSF bank first (default: with hqs)"),
+        register_views: bool = typer.Option(
+            False, "--register/--no-register",
+            help="register the views against the PSF bank first (for banks that may be off)"),
         iterations: int | None = typer.Option(None, help="Richardson-Lucy iterations"),
         subsets: int | None = typer.Option(None, help="view subsets per iteration"),
         zernike: str | None = typer.Option(None, help="global aberration, e.g. '4:0.5,7:-0.2'"),

@@ -7,14 +7,16 @@ Hand-written (no library registers views through a phase-space forward model). P
 2. s_uv = shift of the measured view V_uv against its prediction S_d(I ⊛ H_uv)
    (:func:`metasensor.recon.shifts.measure_shifts_torch`, observed samples only), in pixels,
    less their light-weighted mean (a shift common to all views is the image's position);
-3. H_uv ← the round-0 H_uv translated by the accumulated s_uv (Fourier shift, energy kept).
+3. H_uv ← the round-0 H_uv translated by the accumulated s_uv (Fourier shift, energy kept),
+   accepted only if the Richardson–Lucy fit with it leaves a smaller misfit ||y − A I||.
 
-Stop when a round's r.m.s. shift is below ``tol_px`` or after ``rounds`` rounds.
+Stop when a round's r.m.s. shift is below ``tol_px``, a candidate is rejected, or after
+``rounds`` rounds.
 
 Why: the sparse-gradient solver (:mod:`metasensor.recon.hqs`) resolves detail the views determine
 only through the exact PSFs, so it is fragile where the bank is slightly wrong. Such errors shift
-views: a 0.05 λ r.m.s. defocus error already moves the outer views by ~0.8 px (measured here:
-0.64 px r.m.s. over the 113 views), which is what an object 0.05 λ off the assumed focus, or an
+views: a 0.05 λ r.m.s. defocus error already moves the outer views by ~0.8 px (measured below:
+0.43 px r.m.s. over the 113 views), which is what an object 0.05 λ off the assumed focus, or an
 aberration estimate that far off, gives. Measured (``benchmarks/bench_isa_mismatch.py``: 192-px
 captures, aberration-free, 30 dB; the bank with a defocus error of 0 / 0.025 / 0.05 / 0.1 /
 0.2 λ; HQS SSIM with / without registration):
@@ -25,12 +27,18 @@ captures, aberration-free, 30 dB; the bank with a defocus error of 0 / 0.025 / 0
   (Richardson–Lucy 0.671, 0.668, 0.659, 0.636, 0.628).
 
 Rounds measured 0.43 -> 0.067 -> 0.004 px r.m.s. (0.05 λ) and 1.73 -> 0.037 -> 0.002 px (0.2 λ);
-a right bank reads 0.014-0.036 px and stops after one or two rounds. Cost: one Richardson–Lucy
-(5 iterations) per round, +40-75 % of HQS's time at 192 px. The 384-px demo (``make demo``) moved
-from SSIM 0.816 to 0.830, and its 4 x 4 variant, whose blocks sit between the simulator's 3 x 3
-field samples, from PSNR 11.0 dB to 17.0 dB. What registration cannot fix is the change of
-the PSFs' shape beyond a shift and shifts that vary within a block (depth edges, a field
-aberration that changes across the block).
+a right bank reads 0.014-0.036 px and stops after one or two rounds. Cost: one
+Richardson–Lucy fit (5 iterations) per round plus one, +40-75 % of HQS's time at 192 px. The
+384-px demo (``make demo``, which registers) moved from SSIM 0.816 to 0.831; its 4 x 4 variant,
+whose blocks sit between the simulator's 3 x 3 field samples, from PSNR 11.0 to 17.0 dB. What
+registration cannot fix is a change of the PSFs' shape beyond a shift, and shifts that vary
+within a block (depth edges, a field aberration that changes across the block).
+
+Opt-in (``reconstruct(register=True)``, ``metasensor reconstruct --register``). Without the
+misfit test, strongly aberrated multisite blocks (up to 1.8 λ, with their true banks) measured
+1-24 px r.m.s. of spurious shifts from their blurred views and lost 0.56 dB, while one global bank
+gained 0.86 dB from the same step: the 4 x 4 multisite gain fell from 3.44 to 2.03 dB. Where the
+bank is known to be right (calibrated, or DAO's estimate), leave it off.
 """
 
 from __future__ import annotations
@@ -53,11 +61,14 @@ DEFAULT_TOL_PX = 0.02  # a round below this r.m.s. shift ends the registration
 @dataclass
 class Registration:
     """psf (V, K', K') the registered bank; shifts (V, 2) float64 pixels (dy, dx) it was
-    translated by; history: r.m.s. shift (pixels) measured in every round."""
+    translated by; history: r.m.s. shift (pixels) measured in every round; misfits: the relative
+    misfit ||y − A x||/||y|| of the Richardson–Lucy fit with the given bank, then with each
+    round's candidate (a candidate that does not lower it is rejected and ends the loop)."""
 
     psf: torch.Tensor
     shifts: torch.Tensor
     history: list[float] = field(default_factory=list)
+    misfits: list[float] = field(default_factory=list)
 
 
 def translate_psfs(psf: torch.Tensor, shifts: torch.Tensor) -> torch.Tensor:
@@ -94,18 +105,26 @@ def register_views(psf, data_win, d: int, device=None, rounds: int = DEFAULT_ROU
         raise ValueError(f"rounds must be >= 0, got {rounds}")
     if max_shift_px is None:
         max_shift_px = min(50.0, min(y_win.shape[-2:]) * d / 3.0)
-    total = torch.zeros((psf0.shape[0], 2), dtype=torch.float64)
     light = psf0.sum(dim=(-2, -1)).to(torch.float64).cpu()
-    current = psf0
-    history: list[float] = []
-    for _ in range(rounds):
-        geometry = make_geometry(tuple(y_win.shape[-2:]), d, current.shape[-1] // 2, pad=pad)
-        op = PhaseSpaceOperator(current, geometry, device=device)
+
+    def fit(bank):  # RL estimate, its predictions, the data and the relative misfit
+        geometry = make_geometry(tuple(y_win.shape[-2:]), d, bank.shape[-1] // 2, pad=pad)
+        op = PhaseSpaceOperator(bank, geometry, device=device)
         data, mask = geometry.embed(y_win.to(op.device))
         estimate = richardson_lucy(op, data, mask, iterations=iterations,
                                    subsets=min(subsets, psf0.shape[0])).estimate
         pred = op.forward(estimate)
-        weight = mask.to(pred.dtype)[None].expand_as(pred)
+        m = mask.to(pred.dtype)[None]
+        misfit = float(torch.linalg.vector_norm((pred - data) * m))
+        return pred, data, m.expand_as(pred), misfit / max(float(torch.linalg.vector_norm(data)),
+                                                           1e-30)
+
+    total = torch.zeros((psf0.shape[0], 2), dtype=torch.float64)
+    current = psf0
+    pred, data, weight, misfit = fit(current)
+    history: list[float] = []
+    misfits = [misfit]
+    for _ in range(rounds):
         step = measure_shifts_torch(pred, data, weight=weight, max_shift=max_shift_px / d)
         step = step.cpu() * d
         # a shift common to all views is the image's position, which the views cannot tell from
@@ -113,8 +132,14 @@ def register_views(psf, data_win, d: int, device=None, rounds: int = DEFAULT_ROU
         step = step - (light[:, None] * step).sum(dim=0) / light.sum()
         rms = float(step.pow(2).sum(dim=1).mean().sqrt())
         history.append(rms)
-        total = total + step
-        current = translate_psfs(psf0.to(op.device), total)
+        candidate = translate_psfs(psf0.to(pred.device), total + step)
+        c_pred, c_data, c_weight, c_misfit = fit(candidate)
+        misfits.append(c_misfit)
+        if not c_misfit < misfit:  # the shifts do not explain the data better: keep the bank
+            break
+        total, current = total + step, candidate
+        pred, data, weight, misfit = c_pred, c_data, c_weight, c_misfit
         if rms < tol_px:
             break
-    return Registration(current, total, history)
+    return Registration(current, total, history, misfits)
+

@@ -50,7 +50,7 @@ class DemoSettings:
     # ISA solver of the meta-imaging row: "hqs" (the sparse-gradient prior, recon.hqs) or "rl"
     # (Richardson-Lucy with ``iterations``); the plain light field (1 x 1 scan) always uses RL.
     # Measured on this demo: HQS (after view registration) PSNR 16.78 dB, SSIM 0.831, MTF50
-    # centre / edge 0.177 / 0.214 c/px, 99 s in all (unregistered: 16.68 dB, 0.816, 0.186 /
+    # centre / edge 0.177 / 0.215 c/px, 95 s in all (unregistered: 16.68 dB, 0.816, 0.186 /
     # 0.251, 71 s); RL (6 its) 16.61 dB, 0.608, 0.089 / 0.138. HQS renders bars finer than
     # it resolves (the star's centre, the finest bar groups) flat grey, where RL shows them aliased.
     solver: str = "hqs"
@@ -146,7 +146,7 @@ def run_demo(out: str | Path, settings: DemoSettings | None = None, progress: bo
     fz_meta = sensor_field_zernike(fz_sensor, cap.config, scene.shape, cap.truth.shape)
     rec = ms.reconstruct(views, cap.config, field_zernike=fz_meta, blocks=s.blocks,
                          iterations=s.iterations if s.solver == "rl" else None,
-                         solver=s.solver)
+                         solver=s.solver, register=s.solver == "hqs")
     steps.update()
     steps.set_postfix_str("reconstructing (plain light field)")
     fz_lf = sensor_field_zernike(fz_sensor, lf.config, scene.shape, lf.truth.shape)
