@@ -32,7 +32,8 @@ With ``register=True`` every block's views are first registered against its bank
 (:mod:`metasensor.recon.register`): sub-pixel view shifts, which a defocus or aberration error of
 the bank causes, are measured and folded into the PSFs where they lower the misfit. A 0.1 λ
 defocus error took HQS from SSIM 0.907 to 0.313 (chart, 192 px, 30 dB); registered 0.874. Off by
-default: on the true banks of strongly aberrated multisite blocks it measured spurious shifts.
+default: on the true banks of strongly aberrated multisite blocks it lowered the multisite gain
+from 3.44 to 1.94 dB.
 ``Reconstruction.registration`` holds the r.m.s. shift of each round per block.
 """
 
