@@ -66,3 +66,18 @@ def test_motion_options(kw, match):
     if "chunk" not in kw and "flow_view" not in kw:
         with pytest.raises(ValueError, match=match):
             ms.correct_motion(views[2, 2], None, **kw)
+
+
+@pytest.mark.parametrize("change, match", [({"center": (float("nan"), 7.0)}, "center"),
+                                           ({"scan": 0, "scan_order": ()}, "scan"),
+                                           ({"scan_order": ((0, 0),) * 25}, "once"),
+                                           ({"sensor_shape": (-96, 96)}, "sensor_shape")])
+def test_calibration_values(change, match):
+    from metasensor.sensor.calibration import Calibration
+
+    base = dict(nnum=15, pitch=15.0, rotation=0.0, center=(7.0, 7.0), lenslets=(4, 4),
+                sensor_shape=(96, 96), scan=5, moving="mla",
+                scan_order=tuple((r, c) for r in range(5) for c in range(5)))
+    Calibration(**base)  # the valid one
+    with pytest.raises(ValueError, match=match):
+        Calibration(**{**base, **change})

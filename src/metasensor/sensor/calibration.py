@@ -85,6 +85,19 @@ class Calibration:
             raise ValueError(f"calibration moving must be 'mla' or 'image', got {self.moving!r}")
         if min(self.lenslets) < 1:
             raise ValueError(f"calibration keeps no lenslets ({self.lenslets})")
+        if not all(math.isfinite(v) for v in self.center):
+            raise ValueError(f"calibration center must be finite, got {self.center}")
+        if self.offsets is not None and not all(math.isfinite(v) for o in self.offsets
+                                                for v in o):
+            raise ValueError("calibration offsets must be finite")
+        if min(self.sensor_shape) < 1:
+            raise ValueError(f"calibration sensor_shape must be positive, got {self.sensor_shape}")
+        if not (isinstance(self.scan, int) and self.scan >= 1):
+            raise ValueError(f"calibration scan must be a positive integer, got {self.scan!r}")
+        if len(set(self.scan_order)) != len(self.scan_order) or not all(
+                0 <= r < self.scan and 0 <= c < self.scan for r, c in self.scan_order):
+            raise ValueError(f"calibration scan_order must visit each of the {self.scan}x"
+                             f"{self.scan} phases once, got {list(self.scan_order)}")
 
     # ------------------------------------------------------------------ geometry
     @property
