@@ -3,6 +3,8 @@
 import subprocess
 import sys
 
+import pytest
+
 
 def test_simulate_is_the_function_even_after_subpackage_imports():
     code = ("import metasensor.simulation.lens, metasensor.simulation.scenes\n"
@@ -60,8 +62,6 @@ def test_cli_commands_refuse_to_overwrite_their_input(tmp_path):
     src = tmp_path / "in.tif"
     src.write_bytes(b"x")
     refuse_overwrite([tmp_path / "other.tif", None], [src, None])  # different paths: fine
-    import pytest
-
     with pytest.raises(ValueError, match="would overwrite the input"):
         refuse_overwrite([tmp_path / "." / "in.tif"], [src])
     res = subprocess.run([sys.executable, "-m", "metasensor.cli", "motion", str(src), "--out",

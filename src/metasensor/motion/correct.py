@@ -22,6 +22,7 @@ import numpy as np
 from scipy import ndimage
 
 from metasensor.motion.flow import (
+    FLOW_METHODS,
     _few_threads,
     motion_confidence,
     occlusions,
@@ -59,8 +60,8 @@ def _check_options(scatter: str, threshold: float, smooth: float, method: str) -
     """One-line errors for impossible options, before any flow is computed."""
     if scatter not in ("linear", "cubic"):
         raise ValueError(f"scatter must be 'linear' or 'cubic', got {scatter!r}")
-    if method not in ("dis", "farneback", "registration"):
-        raise ValueError(f"method must be 'dis', 'farneback' or 'registration', got {method!r}")
+    if method not in FLOW_METHODS:
+        raise ValueError(f"method must be one of {FLOW_METHODS}, got {method!r}")
     for name, value in (("threshold", threshold), ("smooth", smooth)):
         if not (isinstance(value, int | float) and math.isfinite(value) and value >= 0):
             raise ValueError(f"{name} must be a non-negative number, got {value!r}")

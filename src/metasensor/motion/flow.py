@@ -22,7 +22,9 @@ import numpy as np
 from scipy import ndimage
 
 __all__ = ["sub_images", "phase_flows", "registration_flows", "suppress_static",
-           "motion_confidence", "occlusions"]
+           "motion_confidence", "occlusions", "FLOW_METHODS"]
+
+FLOW_METHODS = ("dis", "farneback", "registration")  # optical flows, and non-rigid registration
 
 
 def sub_images(view: np.ndarray, order: list[tuple[int, int]]) -> list[np.ndarray]:
@@ -56,7 +58,7 @@ def _engine(method: str):
             return cv2.calcOpticalFlowFarneback(a, b, init.copy(), 0.5, 4, 9, 5, 5, 1.1,
                                                 cv2.OPTFLOW_USE_INITIAL_FLOW)
         return calc
-    raise ValueError(f"flow method must be 'dis', 'farneback' or 'registration', got {method!r}")
+    raise ValueError(f"flow method must be one of {FLOW_METHODS}, got {method!r}")
 
 
 def _order_by_distance(n: int, ref: int) -> list[int]:

@@ -179,13 +179,16 @@ def reconstruct_block(task: BlockTask) -> BlockResult:
     psf = bank[rows, cols]
     data_win = window[rows, cols]
     registration: list[float] = []
+    op = None
     if task.register:
         from metasensor.recon.register import register_views
 
         reg = register_views(psf, data_win, d, device=task.device, pad=task.pad)
-        psf, registration = reg.psf.cpu().numpy(), reg.history
-    geometry = make_geometry(data_win.shape[-2:], d, psf.shape[-1] // 2, pad=task.pad)
-    op = PhaseSpaceOperator(psf, geometry, device=task.device)
+        psf, registration, op = reg.psf.cpu().numpy(), reg.history, reg.operator
+    if op is None:
+        geometry = make_geometry(data_win.shape[-2:], d, psf.shape[-1] // 2, pad=task.pad)
+        op = PhaseSpaceOperator(psf, geometry, device=task.device)
+    geometry = op.geometry
     data, mask = geometry.embed(torch.from_numpy(data_win).to(op.device))
     if task.solver == "hqs":
         from metasensor.recon.hqs import hyper_laplacian_isa

@@ -30,10 +30,6 @@ def _order(text: str | None, period: int):
     return check_scan_order(pairs, period)
 
 
-def _same_file(a: Path, b: Path) -> bool:
-    return a.exists() and b.exists() and a.resolve() == b.resolve()
-
-
 def calibrate_cmd(
     white: Path = typer.Argument(..., help="white (flat-field) or textured raw frame(s), TIFF"),
     out: Path = typer.Option(..., "--out", help="calibration file to write (.toml)"),
@@ -135,8 +131,9 @@ def realign_cmd(
         raise ValueError(f"--offsets must be measure, calib or nominal, got {offsets!r}")
     if out.suffix.lower() not in (".tif", ".tiff", ".zarr"):
         raise ValueError(f"--out must end in .tif, .tiff or .zarr: {out}")
-    if _same_file(out, raw_path):
-        raise ValueError(f"--out {out} would overwrite the input")
+    from metasensor.io.atomic import refuse_overwrite
+
+    refuse_overwrite([out], [raw_path])
     cfg = _config(config, scan)
     phases = _order(order, cfg.scan)
     tp = len(phases)
