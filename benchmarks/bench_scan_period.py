@@ -13,7 +13,8 @@ V = H ⊛ truth, i.e. 1. Were it not, the table says so and compares against tru
 Two noise budgets (``budget``): ``per-frame`` — every frame at SNR 30 dB, so a 15x15 scan collects
 9x the light of a 5x5 one; ``equal-light`` — the same total light for every period (the per-frame
 SNR is 30 dB − 10·log10(p²/25): 44.0 / 34.4 / 30 / 20.5 dB for p = 1 / 3 / 5 / 15), which isolates
-what the sampling density itself adds.
+what the sampling density itself adds; ``noise-free`` — no photon or read noise (quantised only),
+the sampling alone (Extended Data Fig. 2 names no noise level).
 
 Two ISA solvers (``solver``): ``rl``, Richardson–Lucy (every period), and ``hqs``, the
 sparse-gradient prior (``reconstruct``'s default where it applies: periods 3, 5, 15; a 1x1 scan
@@ -70,13 +71,15 @@ def run(quick: bool = False) -> list[dict]:
     if quick:
         scenes.pop("camera")
     rows = []
-    budgets = ("per-frame",) if quick else ("per-frame", "equal-light")
+    budgets = ("per-frame",) if quick else ("per-frame", "equal-light", "noise-free")
     for budget, name, p in [(b, n, p) for b in budgets for n in scenes for p in PERIODS]:
         scene = scenes[name]
         cfg = ms.SystemConfig(scan=p)
         bank = np.asarray(ms.view_psfs(cfg), np.float32)
-        snr = 30.0 if budget == "per-frame" else 30.0 - 10.0 * np.log10(p * p / 25.0)
-        cap = simulate(scene, cfg, snr_db=float(snr), seed=0, comparison=False)
+        snr = {"per-frame": 30.0, "noise-free": None}.get(
+            budget, 30.0 - 10.0 * np.log10(p * p / 25.0))
+        cap = simulate(scene, cfg, snr_db=None if snr is None else float(snr), seed=0,
+                       comparison=False)
         k = truth_scale(cap, bank)
         truth = cap.truth * np.float32(k)
         for solver in ("rl", "hqs") if p > 1 else ("rl",):
@@ -85,7 +88,8 @@ def run(quick: bool = False) -> list[dict]:
             sec = time.perf_counter() - t0
             dr = float(truth.max() - truth.min())
             shape = "x".join(map(str, cap.views.shape))
-            rows.append({"budget": budget, "snr_db": float(snr), "scene": name, "scan": p,
+            rows.append({"budget": budget, "snr_db": None if snr is None else float(snr),
+                         "scene": name, "scan": p,
                          "solver": solver, "views_shape": shape,
                          "ssim": float(structural_similarity(truth, rec.image, data_range=dr)),
                          "psnr_db": float(psnr(rec.image, truth, data_range=dr)),
@@ -129,13 +133,14 @@ def _plot(rows: list[dict], path: Path) -> None:
         sel = [r for r in rows if r["scene"] == scene and r["budget"] == budget
                and r.get("solver", "rl") == solver]
         ax.plot([r["scan"] for r in sel], [r["ssim"] for r in sel],
-                ("o" if budget == "per-frame" else "s") + ("-" if solver == "rl" else ":"),
+                {"per-frame": "o", "equal-light": "s"}.get(budget, "^")
+                + ("-" if solver == "rl" else ":"),
                 label=f"{scene}, {budget}, {solver}")
     ax.set_xscale("log")
     ax.set_xticks(PERIODS, [f"{p}x{p}" for p in PERIODS])
     ax.set_xlabel("scan period")
     ax.set_ylabel("SSIM to truth")
-    ax.set_title("ISA vs scan period (30 dB per frame or equal light)", fontsize=9)
+    ax.set_title("ISA vs scan period (30 dB per frame, equal light, noise-free)", fontsize=9)
     ax.legend(fontsize=6)
     save_figure(fig, path, dpi=120)
 

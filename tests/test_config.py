@@ -85,3 +85,22 @@ def test_optical_digest_ignores_non_optical_fields():
     assert cfg.optical_digest() == cfg.replace(scan=3, bit_depth=16).optical_digest()
     assert cfg.optical_digest() != cfg.replace(na=0.04).optical_digest()
     assert cfg.digest() != cfg.replace(scan=3).digest()
+
+
+@pytest.mark.parametrize("line, word", [
+    ('sensor_shape = "ab"', "sensor_shape"),
+    ("sensor_shape = [100.5, 300]", "sensor_shape"),
+    ("sensor_shape = 5", "sensor_shape"),
+    ('na = "0.5"', "na"),
+    ("scan = 2.5", "scan"),
+    ('mla_pitch = "1e-4"', "mla_pitch"),
+])
+def test_mistyped_toml_values_name_their_key(line, word):
+    with pytest.raises(ConfigError, match=word) as info:
+        ms.SystemConfig.from_toml_string(f"[system]\n{line}\n")
+    assert "\n" not in str(info.value)
+
+
+def test_integral_float_sensor_shape_is_accepted():
+    cfg = ms.SystemConfig.from_toml_string("[system]\nsensor_shape = [300.0, 450]\n")
+    assert cfg.sensor_shape == (300, 450)

@@ -72,3 +72,20 @@ def test_cli_commands_refuse_to_overwrite_their_input(tmp_path):
                           "--config", str(src), "--out", str(tmp_path / "p.h5")],
                          capture_output=True, text=True)
     assert res.returncode != 0 and len(res.stderr.strip().splitlines()) == 1
+
+
+def test_cli_error_after_a_progress_bar_starts_its_own_line():
+    # a command that fails mid-progress: the bar is closed first, the error is its own line
+    code = ("import sys\n"
+            "from tqdm import tqdm\n"
+            "import metasensor.cli as cli\n"
+            "def boom(**_):\n"
+            "    bar = tqdm(total=10, desc='work')\n"
+            "    bar.update(3)\n"
+            "    raise ValueError('views hold NaN')\n"
+            "cli.app = boom\n"
+            "cli.main()\n")
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert res.returncode == 2
+    lines = res.stderr.replace("\r", "\n").splitlines()
+    assert "error: views hold NaN" in lines, res.stderr

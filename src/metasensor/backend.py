@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-__all__ = ["resolve_device", "as_tensor", "to_numpy"]
+__all__ = ["resolve_device", "as_tensor", "to_numpy", "check_memory"]
 
 
 def resolve_device(device: str | torch.device | None = None) -> torch.device:
@@ -32,3 +32,14 @@ def as_tensor(array, device: torch.device | str | None = None, dtype=torch.float
 
 def to_numpy(tensor: torch.Tensor) -> np.ndarray:
     return tensor.detach().cpu().numpy()
+
+
+def check_memory(nbytes: float, what: str) -> None:
+    """Raise MemoryError (one line, naming ``what``) before an allocation of ``nbytes`` that the
+    machine's available memory (psutil) cannot hold, instead of swapping for minutes first."""
+    import psutil
+
+    avail = psutil.virtual_memory().available
+    if nbytes > avail:
+        raise MemoryError(f"{what} needs ~{nbytes / 2**30:.1f} GiB, more than the "
+                          f"{avail / 2**30:.1f} GiB of memory available")

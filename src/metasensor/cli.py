@@ -25,6 +25,22 @@ for _module in _COMMAND_MODULES:
     importlib.import_module(f"metasensor.{_module}").register(app)
 
 
+def _fail(message: str, code: int) -> None:
+    """Close progress bars a failing command left open (so the error starts its own line, not
+    the bar's), print ``error: message`` to stderr and exit with ``code``."""
+    import sys
+
+    try:
+        from tqdm import tqdm
+
+        for bar in list(getattr(tqdm, "_instances", ())):
+            bar.close()
+    except Exception:  # pragma: no cover - tqdm missing or a bar already torn down
+        pass
+    typer.echo(f"error: {message}", err=True)
+    sys.exit(code)
+
+
 def main() -> None:
     """Entry point: run the app; bad input exits non-zero with one line naming the problem."""
     import sys
@@ -41,22 +57,16 @@ def main() -> None:
         code = 0
     except click.UsageError as exc:  # missing/unknown option or command: one line, no box
         where = f"{exc.ctx.command_path}: " if exc.ctx is not None else ""
-        typer.echo(f"error: {where}{exc.format_message()}", err=True)
-        sys.exit(2)
+        _fail(f"{where}{exc.format_message()}", 2)
     except typer.Abort:
-        typer.echo("error: aborted", err=True)
-        sys.exit(1)
+        _fail("aborted", 1)
     except (ValueError, TypeError, FileNotFoundError, OSError) as exc:
-        typer.echo(f"error: {exc}", err=True)
-        sys.exit(2)
+        _fail(str(exc), 2)
     except MemoryError as exc:  # e.g. an absurd --size or aberration: say so, in one line
-        typer.echo(f"error: not enough memory for this request ({exc or 'MemoryError'})",
-                   err=True)
-        sys.exit(2)
+        _fail(f"not enough memory for this request ({exc or 'MemoryError'})", 2)
     except RuntimeError as exc:  # corrupt chunks of a store, backend failures: one line
         first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-        typer.echo(f"error: {first}", err=True)
-        sys.exit(1)
+        _fail(first, 1)
     sys.exit(code if isinstance(code, int) else 0)
 
 

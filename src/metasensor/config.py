@@ -237,8 +237,13 @@ class SystemConfig:
         if unknown:
             raise ConfigError(f"unknown system parameter(s): {', '.join(unknown)}")
         data = dict(data)
-        if "sensor_shape" in data and data["sensor_shape"] is not None:
-            data["sensor_shape"] = tuple(int(s) for s in data["sensor_shape"])
+        shape = data.get("sensor_shape")
+        if isinstance(shape, (list, tuple)) and all(
+            isinstance(s, (int, float)) and not isinstance(s, bool) and float(s).is_integer()
+            for s in shape
+        ):
+            data["sensor_shape"] = tuple(int(s) for s in shape)
+        # anything else reaches validate(), which names sensor_shape and the value
         return cls(**data)
 
     def to_json(self) -> str:

@@ -284,3 +284,16 @@ def test_widefield_bad_input():
         widefield_psf(cfg, sampling=-1.0)
     with pytest.raises(ValueError, match="size"):
         widefield_psf(cfg, size=10)
+
+
+def test_absurd_aberration_is_refused_before_the_work(monkeypatch):
+    # 200 waves of defocus: rays reach 3,163 px, the bank would need 15² x 6,325² floats (34 GiB)
+    import psutil
+
+    class Mem:
+        available = 8 * 2**30
+
+    monkeypatch.setattr(psutil, "virtual_memory", lambda: Mem)
+    with pytest.raises(MemoryError, match=r"PSF bank .*6325.*GiB") as info:
+        view_psfs(SystemConfig(), zernike=[0, 0, 0, 200], cache=False)
+    assert "\n" not in str(info.value)

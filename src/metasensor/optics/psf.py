@@ -37,7 +37,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from metasensor.backend import resolve_device
+from metasensor.backend import check_memory, resolve_device
 from metasensor.config import SystemConfig
 from metasensor.optics import cache as _cache
 from metasensor.optics.coherent import (
@@ -231,6 +231,10 @@ def view_psfs(cfg: SystemConfig, zernike=None, depth: float = 0.0, *,
         if hit is not None:
             return hit
 
+    reach = _ray_reach(cfg, gmax) / cfg.pixel_pitch  # the bank spans at least ±reach pixels
+    k_min = size or 2 * int(reach) + 1
+    check_memory(4.0 * cfg.nnum**2 * (k_min * sub) ** 2, f"the PSF bank ({cfg.nnum}² views of "
+                 f">= {k_min}² px: rays reach {reach:.0f} px, max |∇W| {gmax:.0f} waves/radius)")
     if size is None:
         size = _default_size(cfg, z, depth, phase, amplitude, gmax, dev)
     lenslets, n = _grid(cfg, size, os_)
