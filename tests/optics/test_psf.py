@@ -297,3 +297,28 @@ def test_absurd_aberration_is_refused_before_the_work(monkeypatch):
     with pytest.raises(MemoryError, match=r"PSF bank .*6325.*GiB") as info:
         view_psfs(SystemConfig(), zernike=[0, 0, 0, 200], cache=False)
     assert "\n" not in str(info.value)
+
+
+def test_cache_keeps_under_its_size_cap_evicting_least_recently_used(monkeypatch, tmp_path):
+    import os
+    import time
+
+    arr = np.zeros(2**18, np.float32)  # 1 MiB (+128 B header)
+    monkeypatch.setenv("METASENSOR_CACHE_MAX_GB", str(2.5 / 1024))  # room for two
+    for i, key in enumerate("abc"):
+        psf_cache.store(key, arr, tmp_path)
+        os.utime(tmp_path / "psf" / f"{key}.npy", (time.time() - 100 + i,) * 2)
+        if key == "b":
+            assert psf_cache.load("a", tmp_path) is not None  # a hit: "a" is now the newest
+    names = sorted(f.stem for f in (tmp_path / "psf").glob("*.npy"))
+    assert names == ["a", "c"]  # "b", least recently used, went; the new "c" always stays
+    big = np.zeros(2**20, np.float32)  # 4 MiB, over the cap alone: kept, the others go
+    psf_cache.store("d", big, tmp_path)
+    assert sorted(f.stem for f in (tmp_path / "psf").glob("*.npy")) == ["d"]
+    monkeypatch.setenv("METASENSOR_CACHE_MAX_GB", "lots")
+    with pytest.raises(ValueError, match="METASENSOR_CACHE_MAX_GB"):
+        psf_cache.load("a", tmp_path)
+    monkeypatch.setenv("METASENSOR_CACHE_MAX_GB", "inf")
+    for key in "xyz":
+        psf_cache.store(key, big, tmp_path)
+    assert len(list((tmp_path / "psf").glob("*.npy"))) == 4

@@ -5,6 +5,12 @@ Location: the environment variable ``METASENSOR_CACHE`` if set, else the folder 
 temporary name in the same folder and renamed with ``os.replace`` (atomic), so concurrent
 writers and readers never see a partial file; a corrupt entry counts as a miss and is removed.
 ``stats`` counts hits and misses in this process (for tests and benchmarks).
+
+Size: the folder is kept under ``METASENSOR_CACHE_MAX_GB`` GiB (default
+:data:`DEFAULT_MAX_GB`; ``inf`` for no limit). After each store the least recently used banks
+(a hit refreshes a bank's modification time) are removed until the folder fits, never the one
+just written. Without the cap the cache only grew: 893 banks, 50 GiB, on the development machine
+after a few weeks of benchmarks.
 """
 
 from __future__ import annotations
@@ -17,7 +23,10 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["cache_dir", "set_cache_dir", "cache_key", "load", "store", "stats", "clear"]
+__all__ = ["cache_dir", "set_cache_dir", "cache_key", "load", "store", "stats", "clear",
+           "max_bytes", "DEFAULT_MAX_GB"]
+
+DEFAULT_MAX_GB = 10.0
 
 _setting: Path | None = None
 stats = {"hits": 0, "misses": 0}
@@ -42,6 +51,43 @@ def cache_dir() -> Path:
     return Path.home() / ".cache" / "metasensor"
 
 
+def max_bytes() -> float:
+    """The size cap in bytes, from ``METASENSOR_CACHE_MAX_GB`` (GiB, > 0 or ``inf``)."""
+    text = os.environ.get("METASENSOR_CACHE_MAX_GB", "").strip()
+    if not text:
+        return DEFAULT_MAX_GB * 2**30
+    try:
+        gb = float(text)
+    except ValueError:
+        gb = float("nan")
+    if not gb > 0:
+        raise ValueError(f"METASENSOR_CACHE_MAX_GB must be a positive number of GiB or 'inf', "
+                         f"got {text!r}")
+    return gb * 2**30
+
+
+def _evict(root: Path, keep: Path, limit: float) -> int:
+    """Remove the least recently used ``*.npy`` in ``root`` (not ``keep``) until the folder's
+    banks fit in ``limit`` bytes; returns how many were removed."""
+    entries = []
+    for f in root.glob("*.npy"):
+        with contextlib.suppress(OSError):
+            st = f.stat()
+            entries.append((st.st_mtime, st.st_size, f))
+    total = sum(e[1] for e in entries)
+    removed = 0
+    for _, size, f in sorted(entries, key=lambda e: e[0]):
+        if total <= limit:
+            break
+        if f == keep:
+            continue
+        with contextlib.suppress(OSError):
+            f.unlink()
+            total -= size
+            removed += 1
+    return removed
+
+
 def cache_key(*parts) -> str:
     """SHA-256 hex digest of the parts (bytes, str, numbers, NumPy arrays, None)."""
     h = hashlib.sha256()
@@ -64,6 +110,7 @@ def _path(key: str, folder: Path | None) -> Path:
 
 def load(key: str, folder: Path | None = None) -> np.ndarray | None:
     """The cached array for ``key``, or ``None`` (a miss). Counts in :data:`stats`."""
+    max_bytes()  # a bad size setting is reported before the work, not after it
     path = _path(key, folder)
     if path.is_file():
         try:
@@ -73,13 +120,17 @@ def load(key: str, folder: Path | None = None) -> np.ndarray | None:
                 path.unlink()
         else:
             stats["hits"] += 1
+            with contextlib.suppress(OSError):
+                os.utime(path)  # recently used: the last to be evicted
             return arr
     stats["misses"] += 1
     return None
 
 
 def store(key: str, array: np.ndarray, folder: Path | None = None) -> Path | None:
-    """Write ``array`` under ``key`` atomically; returns the path (``None`` if not writable)."""
+    """Write ``array`` under ``key`` atomically, then evict the least recently used banks beyond
+    the size cap (:func:`max_bytes`); returns the path (``None`` if not writable)."""
+    limit = max_bytes()
     path = _path(key, folder)
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
@@ -94,6 +145,8 @@ def store(key: str, array: np.ndarray, folder: Path | None = None) -> Path | Non
         with contextlib.suppress(OSError):
             os.unlink(tmp)
         raise
+    if limit != float("inf"):
+        _evict(path.parent, path, limit)
     return path
 
 
