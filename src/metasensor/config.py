@@ -233,10 +233,11 @@ class SystemConfig:
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> SystemConfig:
         names = {f.name for f in dataclasses.fields(cls)}
-        unknown = sorted(set(data) - names)
+        # "metasensor": what a view stack's description adds to its configuration (io.views)
+        unknown = sorted(set(data) - names - {"metasensor"})
         if unknown:
             raise ConfigError(f"unknown system parameter(s): {', '.join(unknown)}")
-        data = dict(data)
+        data = {k: v for k, v in data.items() if k != "metasensor"}
         shape = data.get("sensor_shape")
         if isinstance(shape, (list, tuple)) and all(
             isinstance(s, (int, float)) and not isinstance(s, bool) and float(s).is_integer()

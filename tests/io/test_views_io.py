@@ -59,3 +59,23 @@ def test_zarr_write_over_a_plain_file_fails_cleanly_and_bad_metadata_is_named(tm
                      description='{"metasensor": {"config": "x"}}', metadata=None)
     with pytest.raises(ValueError, match="not a table"):
         read_config_from_views(bad)
+
+
+def test_description_is_the_configuration_as_json_and_old_layouts_still_read(tmp_path):
+    # interface.md: "metadata (the system configuration) goes into the TIFF's description as JSON"
+    import json
+
+    cfg = ms.SystemConfig(nnum=3, scan=3)
+    views = np.zeros((3, 3, 4, 4), np.float32)
+    path = write_views(tmp_path / "v.tif", views, cfg, extra={"scale": 2.0})
+    desc = tifffile.TiffFile(path).pages[0].description
+    assert ms.SystemConfig.from_json(desc) == cfg
+    meta = json.loads(desc)
+    assert meta["scan"] == 3 and meta["metasensor"]["kind"] == "views"
+    assert meta["metasensor"]["scale"] == 2.0
+    # a bare configuration written by someone else, and this package's older nested layout
+    for text in (cfg.to_json(), json.dumps({"metasensor": {"config": cfg.to_dict()}})):
+        other = tmp_path / "other.tif"
+        tifffile.imwrite(other, views.reshape(9, 4, 4), photometric="minisblack",
+                         description=text, metadata=None)
+        assert read_config_from_views(other) == cfg

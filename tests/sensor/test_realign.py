@@ -82,13 +82,17 @@ def test_compiled_gather_equals_numpy(dtype=np.uint16):
     frames = rng.integers(0, 4096, (25, 97, 130)).astype(dtype)
     order = scan_order(5, "serpentine")
     for moving in ("mla", "image"):
-        a = realign(frames, cfg, order, moving, engine="numpy")
-        b = realign(frames, cfg, order, moving, engine="numba")
+        a = realign(frames, cfg, order, moving, engine="numpy", dtype=None)
+        b = realign(frames, cfg, order, moving, engine="numba", dtype=None)
+        assert a.dtype == b.dtype == dtype
         np.testing.assert_array_equal(a, b)
+        c = realign(frames, cfg, order, moving)  # float32 by default (interface.md), exact
+        assert c.dtype == np.float32
+        np.testing.assert_array_equal(c, a.astype(np.float32))
     out = np.empty_like(a)
     assert realign(frames, cfg, order, "image", out=out) is out
     for moving in ("mla", "image"):
-        views = realign(frames, cfg, order, moving)
+        views = realign(frames, cfg, order, moving, dtype=None)
         np.testing.assert_array_equal(
             unrealign(views, cfg, order, moving, frames.shape[1:], engine="numba"),
             unrealign(views, cfg, order, moving, frames.shape[1:], engine="numpy"))

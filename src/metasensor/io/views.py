@@ -1,7 +1,10 @@
 """View stacks on disk: multi-page TIFF (page ``u * nnum + v`` = view (u, v)) or Zarr.
 
-The TIFF layout is the authors' "meta image" layout (interface.md); the system configuration is
-stored as JSON in the TIFF's ImageDescription (key ``"metasensor"``) and as a Zarr attribute.
+The TIFF layout is the authors' "meta image" layout (interface.md). The TIFF's ImageDescription
+(and the Zarr array's attributes) is the system configuration as JSON, ``cfg.to_dict()`` at the top
+level (``SystemConfig.from_json(description)`` reads it back), plus one key ``"metasensor"`` with
+what else the writer knows (``kind``, ``view_shape``, extras). Readers also accept a bare
+configuration and the older layout, which nested it under ``["metasensor"]["config"]``.
 """
 
 from __future__ import annotations
@@ -15,7 +18,15 @@ import numpy as np
 from metasensor.config import SystemConfig
 from metasensor.io.atomic import atomic_path
 
-__all__ = ["write_views", "read_views", "read_config_from_views"]
+__all__ = ["write_views", "read_views", "read_config_from_views", "description"]
+
+
+def description(cfg: SystemConfig | None, **meta) -> dict:
+    """The metadata of a TIFF or Zarr this package writes: ``cfg.to_dict()`` at the top level
+    (what interface.md asks of a view stack's description) and ``meta`` under ``"metasensor"``."""
+    out = dict(cfg.to_dict()) if cfg is not None else {}
+    out["metasensor"] = dict(meta)
+    return out
 
 
 def _check_views(views: np.ndarray) -> np.ndarray:
@@ -32,11 +43,7 @@ def write_views(path: str | Path, views: np.ndarray, cfg: SystemConfig | None = 
 
     views = _check_views(views)
     path = Path(path)
-    meta = {"metasensor": {"kind": "views", "view_shape": list(views.shape)}}
-    if cfg is not None:
-        meta["metasensor"]["config"] = cfg.to_dict()
-    if extra:
-        meta["metasensor"].update(extra)
+    meta = description(cfg, kind="views", view_shape=list(views.shape), **(extra or {}))
     n = views.shape[0]
     if path.suffix.lower() == ".zarr":
         return _write_zarr(path, views, meta)
@@ -121,7 +128,7 @@ def read_config_from_views(path: str | Path) -> SystemConfig | None:
     if path.suffix.lower() == ".zarr":
         import zarr
 
-        meta = dict(zarr.open_array(str(path), mode="r").attrs).get("metasensor", {})
+        meta = dict(zarr.open_array(str(path), mode="r").attrs)
     else:
         try:
             with tifffile.TiffFile(path) as tif:
@@ -129,10 +136,17 @@ def read_config_from_views(path: str | Path) -> SystemConfig | None:
         except Exception as exc:
             raise ValueError(f"{path}: not a readable TIFF ({exc})") from None
         try:
-            meta = json.loads(desc).get("metasensor", {})
-        except (json.JSONDecodeError, AttributeError):
+            meta = json.loads(desc)
+        except json.JSONDecodeError:
             return None
-    cfg = meta.get("config") if isinstance(meta, dict) else None
+    if not isinstance(meta, dict):
+        return None
+    fields = set(SystemConfig.__dataclass_fields__)
+    top = {k: v for k, v in meta.items() if k in fields}
+    if top:  # the configuration itself (this writer's layout, or a bare one)
+        return SystemConfig.from_dict(top)
+    nested = meta.get("metasensor")
+    cfg = nested.get("config") if isinstance(nested, dict) else None  # the older layout
     if cfg and not isinstance(cfg, dict):
         raise ValueError(f"{path}: the stored metasensor config is not a table: {cfg!r:.60}")
     return SystemConfig.from_dict(cfg) if cfg else None

@@ -34,10 +34,11 @@ def write_outputs(out: Path, rec, views) -> list[Path]:
     import tifffile
 
     from metasensor.io.atomic import atomic_path, atomic_write_text
+    from metasensor.io.views import description
 
     out.mkdir(parents=True, exist_ok=True)
     image = np.asarray(rec.image, dtype=np.float32)
-    meta = {"metasensor": {"kind": "image", "config": rec.config.to_dict(), "method": rec.method}}
+    meta = description(rec.config, kind="image", method=rec.method)
     with atomic_path(out / "image.tif") as tmp:
         tifffile.imwrite(tmp, image, description=json.dumps(meta), metadata=None)
     with atomic_path(out / "zernike.npy") as tmp:

@@ -142,7 +142,7 @@ def run_demo(out: str | Path, settings: DemoSettings | None = None, progress: bo
     steps.update()
 
     steps.set_postfix_str("reconstructing (meta-imaging, multisite)")
-    views = ms.realign(cap.frames, cap.config, cap.scan_order).astype(np.float32)
+    views = ms.realign(cap.frames, cap.config, cap.scan_order)
     fz_meta = sensor_field_zernike(fz_sensor, cap.config, scene.shape, cap.truth.shape)
     rec = ms.reconstruct(views, cap.config, field_zernike=fz_meta, blocks=s.blocks,
                          iterations=s.iterations if s.solver == "rl" else None,

@@ -91,32 +91,41 @@ def _check_size(shape: tuple[int, ...], cfg: SystemConfig, margin: int) -> None:
 
 
 def realign(frames, cfg: SystemConfig, scan_order=None, moving: str = "mla", *,
-            out: np.ndarray | None = None, engine: str = "auto") -> np.ndarray:
+            out: np.ndarray | None = None, engine: str = "auto",
+            dtype=np.float32) -> np.ndarray:
     """Raw frames ``(T, H, W)`` of one scan period → views ``(nnum, nnum, Ly*p, Lx*p)``.
 
     ``T = cfg.scan**2`` rectified frames in ``scan_order`` (None: row-major; a preset name or a
-    list of (row, col) phases). The output keeps the frames' dtype, so integer data are
-    realigned exactly. ``out``: optional preallocated C-contiguous output of that shape and
-    dtype. ``engine``: ``"auto"`` (compiled gather for large data), ``"numba"`` or ``"numpy"``.
-    The input is never modified. A torch tensor (e.g. on CUDA) is realigned on its device and
-    a new tensor is returned.
+    list of (row, col) phases). ``dtype``: of the views, float32 by default (interface.md;
+    exact for sensor data up to 24 bits); ``None`` keeps the frames' dtype (uint16 views take
+    half the memory). ``out``: optional preallocated C-contiguous output of that shape and of
+    the frames' dtype (``dtype`` is then ignored). ``engine``: ``"auto"`` (compiled gather for
+    large data), ``"numba"`` or ``"numpy"``. The input is never modified. A torch tensor (e.g.
+    on CUDA) is realigned on its device and a new tensor (of ``dtype``) is returned.
     """
     p, _, margin = _geometry(cfg, moving)
     order = check_scan_order(scan_order, p)
     if type(frames).__module__.startswith("torch"):
-        return _realign_torch(frames, cfg, order, moving, margin)
+        views = _realign_torch(frames, cfg, order, moving, margin)
+        if dtype is None:
+            return views
+        import torch
+
+        return views.to(torch.from_numpy(np.empty(0, dtype=dtype)).dtype)
     frames = _check_frames(frames, cfg, p, margin)
     n = cfg.nnum
     ly, lx = lenslet_counts(frames.shape[1:], cfg, moving)
     shape = (n, n, ly * p, lx * p)
+    cast = out is None and dtype is not None and np.dtype(dtype) != frames.dtype
     if out is None:
         out = np.empty(shape, dtype=frames.dtype)
     elif (out.shape != shape or out.dtype != frames.dtype
           or not out.flags.c_contiguous or not out.flags.writeable):
         raise ValueError(f"out must be a writeable C-contiguous {frames.dtype} array of shape "
                          f"{shape}, got {out.dtype} {out.shape}")
-    return gather_views(frames, out, order, phase_offsets(order, cfg, moving), n, p, ly, lx,
-                        engine=engine)
+    views = gather_views(frames, out, order, phase_offsets(order, cfg, moving), n, p, ly, lx,
+                         engine=engine)
+    return views.astype(dtype) if cast else views
 
 
 def _realign_torch(frames, cfg: SystemConfig, order, moving: str, margin: int):

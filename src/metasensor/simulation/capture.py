@@ -258,7 +258,7 @@ def simulate(scene, cfg: SystemConfig, zernike=None, field_zernike=None, depth=N
     noisy, model = add_noise(clean, snr_db, photons, read_noise, bits, seeds[0])
     frames = unrealign(noisy.astype(np.uint16), cfg, order, moving="mla", frame_shape=shape)
     del noisy
-    views_noisy = realign(frames, cfg, order, moving="mla").astype(np.float32)
+    views_noisy = realign(frames, cfg, order, moving="mla")
     o = cfg.field_offset_px
     crop = (slice(o, o + ly * n), slice(o, o + lx * n))
     truth = (reference[crop] * np.float32(scale)).astype(np.float32)

@@ -16,7 +16,7 @@ def write_capture(cap, out: Path, figure: bool = True, clean: bool = False) -> l
     import tifffile
 
     from metasensor.io.atomic import atomic_path, atomic_write_text
-    from metasensor.io.views import write_views
+    from metasensor.io.views import description, write_views
 
     out.mkdir(parents=True, exist_ok=True)
     cfg = cap.config
@@ -29,8 +29,7 @@ def write_capture(cap, out: Path, figure: bool = True, clean: bool = False) -> l
 
     def tif(name, arr, extra=None):
         path = out / name
-        desc = {"metasensor": {"kind": name.split(".")[0], "config": cfg.to_dict(), **meta,
-                               **(extra or {})}}
+        desc = description(cfg, kind=name.split(".")[0], **meta, **(extra or {}))
         with atomic_path(path) as tmp:
             tifffile.imwrite(tmp, arr, description=json.dumps(desc), metadata=None,
                              bigtiff=arr.nbytes > 2**31)
