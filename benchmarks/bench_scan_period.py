@@ -10,7 +10,7 @@ SSIM(15) − SSIM(5) < 0.02.
 ``truth_scale``: Σ views_clean / Σ A(truth) on the centre view; the contract (simulate docs) is
 V = H ⊛ truth, i.e. 1. Were it not, the table says so and compares against truth × that factor.
 
-Two noise budgets (``budget``): ``per-frame`` — every frame at SNR 30 dB, so a 15x15 scan collects
+Three noise budgets (``budget``): ``per-frame`` — every frame at SNR 30 dB, so a 15x15 scan collects
 9x the light of a 5x5 one; ``equal-light`` — the same total light for every period (the per-frame
 SNR is 30 dB − 10·log10(p²/25): 44.0 / 34.4 / 30 / 20.5 dB for p = 1 / 3 / 5 / 15), which isolates
 what the sampling density itself adds; ``noise-free`` — no photon or read noise (quantised only),

@@ -95,7 +95,9 @@ def test_registration_rescues_hqs_from_a_defocus_error(capture):
     assert s_fixed > s_right - 0.06, (s_right, s_fixed)
     assert right.registration[0][0][0] < 0.05  # the right bank: nothing to register
     assert fixed.registration[0][0][0] > 0.4 and fixed.registration[0][0][-1] < 0.1
-    assert wrong.registration == [[[]]]
+    assert wrong.registration == [[[]]] and wrong.registration_zernike is None
+    # the fit names the bank's error: 0.1 λ too much defocus reads Z4 ~ -0.1 λ
+    assert -0.12 < fixed.registration_zernike[0, 0, 3] < -0.08, fixed.registration_zernike[0, 0]
 
 
 def test_registration_rejects_shifts_that_do_not_lower_the_misfit(bank, monkeypatch):
@@ -117,3 +119,56 @@ def test_registration_rejects_shifts_that_do_not_lower_the_misfit(bank, monkeypa
     assert reg.misfits[1] > reg.misfits[0]
     assert float(torch.linalg.vector_norm(reg.shifts)) == 0.0
     assert torch.equal(reg.psf, bank)
+
+
+def _shifted_window(bank, true, s=40, seed=0):
+    moved = translate_psfs(bank, true)
+    g = make_geometry((s, s), 3, moved.shape[-1] // 2, pad=True)
+    op = PhaseSpaceOperator(moved, g, device="cpu")
+    clean = op.forward(torch.from_numpy(resolution_chart(g.domain[0])))
+    gen = torch.Generator().manual_seed(seed)
+    sigma = float(torch.sqrt((clean**2).mean() / 1e3))
+    noisy = clean + sigma * torch.randn(clean.shape, generator=gen)
+    oy, ox = g.m0
+    return noisy[:, oy:oy + s, ox:ox + s]
+
+
+def test_wavefront_registration_applies_a_gradient_field_and_names_the_bank_error(bank):
+    # shifts in proportion to the pupil position are a defocus error's: with the system given,
+    # the fit explains them (> 0.95), applies its gradient field, and reports the error as Z4.
+    # Expected Z4: the view at pupil edge (7, 13) moves by 0.18 * 6 = 1.08 px, and one wave of
+    # Z4 moves it by -12.65 px (wavefront.predicted_shifts): about -0.085 λ.
+    from metasensor.recon.wavefront import predicted_shifts
+
+    cfg = ms.SystemConfig()
+    u, v = np.nonzero(cfg.view_mask())
+    c = cfg.nnum // 2
+    true = torch.tensor(np.stack([u - c, v - c], axis=1) * 0.18, dtype=torch.float64)
+    window = _shifted_window(bank, true)
+    reg = register_views(bank, window, 3, device="cpu", cfg=cfg, uv=list(zip(u, v, strict=True)))
+    err = (reg.shifts - true).pow(2).sum(dim=1).mean().sqrt()
+    assert float(err) < 0.1, float(err)
+    assert reg.explained[0] > 0.95, reg.explained
+    per_wave = -predicted_shifts(np.array([0, 0, 0, 1.0]), cfg)[7, 13, 1]
+    assert abs(reg.zernike[3] + 1.08 / per_wave) < 0.015, reg.zernike[3]
+    others = np.delete(reg.zernike, 3)
+    assert np.abs(others).max() < 0.01, others
+    with pytest.raises(ValueError, match="cfg and uv"):
+        register_views(bank, window, 3, device="cpu", cfg=cfg)
+
+
+def test_wavefront_registration_stops_at_shifts_no_wavefront_explains(bank, monkeypatch):
+    # a (forced) measurement of random shifts, 0.7 px r.m.s. per view: no wavefront error makes
+    # them (the fit explains ~0.15 of them), so the round ends the registration before any fit
+    import metasensor.recon.register as reg_mod
+
+    cfg = ms.SystemConfig()
+    u, v = np.nonzero(cfg.view_mask())
+    window = _shifted_window(bank, torch.zeros(bank.shape[0], 2, dtype=torch.float64), s=30)
+    gen = torch.Generator().manual_seed(2)
+    wrong = 0.5 / 3.0 * torch.randn((bank.shape[0], 2), generator=gen, dtype=torch.float64)
+    monkeypatch.setattr(reg_mod, "measure_shifts_torch", lambda *a, **k: wrong)
+    reg = register_views(bank, window, 3, device="cpu", cfg=cfg, uv=list(zip(u, v, strict=True)))
+    assert len(reg.explained) == 1 and reg.explained[0] < reg_mod.MIN_EXPLAINED
+    assert len(reg.misfits) == 1  # no candidate was fitted
+    assert torch.equal(reg.psf, bank) and float(reg.shifts.abs().sum()) == 0.0

@@ -20,7 +20,7 @@ view grid); the pieces follow the light-field literature as cited in each module
 used views twice (input copy, padded copy), the cost volume ``(candidates, H, W)`` float32 and a
 few ``(9, H, W)`` accumulators (about 2 GB for 113 views of 1,000 x 1,000, 64 candidates).
 Speed (benchmarks/bench_depth.py): 1,000 x 1,000 views, 113 views, 64 candidates, refinement
-included: about 53 s of CPU time on one core.
+included: about 48 s of CPU time (25 s on 2 cores).
 """
 
 from __future__ import annotations

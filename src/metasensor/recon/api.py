@@ -30,11 +30,12 @@ at 600-1,000 px and 8.1x at 2,010 px (153 s on 2 cores, 6.8 GB; recon.hqs).
 
 With ``register=True`` every block's views are first registered against its bank
 (:mod:`metasensor.recon.register`): sub-pixel view shifts, which a defocus or aberration error of
-the bank causes, are measured and folded into the PSFs where they lower the misfit. A 0.1 λ
-defocus error took HQS from SSIM 0.907 to 0.313 (chart, 192 px, 30 dB); registered 0.874. Off by
-default: on the true banks of strongly aberrated multisite blocks it lowered the multisite gain
-from 3.44 to 1.94 dB.
-``Reconstruction.registration`` holds the r.m.s. shift of each round per block.
+the bank causes, are measured, fitted by a wavefront error's gradients and folded into the PSFs
+where they lower the misfit. A 0.1 λ defocus error took HQS from SSIM 0.907 to 0.313 (chart,
+192 px, 30 dB); registered 0.874. Off by default: on the true banks of strongly aberrated
+multisite blocks it lowered the multisite gain from 3.44 to 2.70 dB.
+``Reconstruction.registration`` holds the r.m.s. shift of each round per block, and
+``registration_zernike`` the wavefront those shifts amount to (minus each bank's error).
 """
 
 from __future__ import annotations
@@ -48,6 +49,7 @@ import numpy as np
 from metasensor.config import SystemConfig
 from metasensor.recon.blocks import Block, Stitcher, block_zernikes, split_blocks
 from metasensor.recon.isa import DEFAULT_ITERATIONS, default_subsets, subset_major, view_order
+from metasensor.recon.register import WAVEFRONT_MODES
 
 __all__ = ["reconstruct", "Reconstruction", "BlockTask", "reconstruct_block"]
 
@@ -73,6 +75,9 @@ class Reconstruction:
     dao_history: list = field(default_factory=list)  # [by][bx] -> DAO history (wave/geometric)
     # [by][bx] -> r.m.s. view shift (px) measured in each registration round (recon.register)
     registration: list = field(default_factory=list)
+    # (by, bx, J) the wavefront (waves, Noll) the registered shifts amount to: minus the error of
+    # each block's bank (Registration.zernike); None without registration
+    registration_zernike: np.ndarray | None = None
 
 
 @dataclass
@@ -107,6 +112,7 @@ class BlockResult:
     history: list[float]
     dao_history: list[float]
     registration: list[float] = field(default_factory=list)
+    registration_zernike: np.ndarray | None = None
 
 
 def _default_psfs(cfg: SystemConfig, zernike, device, size: int | None = None):
@@ -179,12 +185,15 @@ def reconstruct_block(task: BlockTask) -> BlockResult:
     psf = bank[rows, cols]
     data_win = window[rows, cols]
     registration: list[float] = []
+    reg_zernike = None
     op = None
     if task.register:
         from metasensor.recon.register import register_views
 
-        reg = register_views(psf, data_win, d, device=task.device, pad=task.pad)
+        reg = register_views(psf, data_win, d, device=task.device, pad=task.pad, cfg=task.cfg,
+                             uv=task.uv)
         psf, registration, op = reg.psf.cpu().numpy(), reg.history, reg.operator
+        reg_zernike = reg.zernike
     if op is None:
         geometry = make_geometry(data_win.shape[-2:], d, psf.shape[-1] // 2, pad=task.pad)
         op = PhaseSpaceOperator(psf, geometry, device=task.device)
@@ -201,7 +210,7 @@ def reconstruct_block(task: BlockTask) -> BlockResult:
     window_img = geometry.crop(result.estimate).detach().cpu().numpy()
     ry, rx = task.block.region_in_window()
     return BlockResult(task.block, np.ascontiguousarray(window_img[ry, rx], dtype=np.float32),
-                       zernike, result.history, dao_history, registration)
+                       zernike, result.history, dao_history, registration, reg_zernike)
 
 
 def _check_views(views, cfg: SystemConfig):
@@ -244,7 +253,8 @@ def reconstruct(views, cfg: SystemConfig, method: str = "isa", zernike=None, fie
         HQS's detail depends on the exact PSFs. Default False.
     view_radius : pupil radius (views) of the views used (``cfg.view_mask``; default 113 views).
     order : "spiral" (outside in, the authors'), "radius" (inside out) or "raster".
-    margin : pixels of extra view data around each block (default: the PSF radius).
+    margin : pixels of extra view data around each block (default: the radius of a given ``psf``
+        bank, else ``cfg.nnum``).
     pad : pad the estimate by the PSF radius (linear convolution; False = circular, for study).
     scheduler : None/"threads", "sync", an address "tcp://host:port", or a dask Client/cluster.
     out : None (NumPy image) or a writable (H, W) float32 array (e.g. zarr) to stitch into.
@@ -326,6 +336,7 @@ def reconstruct(views, cfg: SystemConfig, method: str = "isa", zernike=None, fie
     history = [[[] for _ in range(bx)] for _ in range(by)]
     dao_hist = [[[] for _ in range(bx)] for _ in range(by)]
     reg_hist = [[[] for _ in range(bx)] for _ in range(by)]
+    reg_zern = np.zeros((by, bx, max(WAVEFRONT_MODES)), np.float32) if register else None
     zern_used = zern.copy()
 
     def collect(res: BlockResult) -> None:
@@ -334,6 +345,8 @@ def reconstruct(views, cfg: SystemConfig, method: str = "isa", zernike=None, fie
         history[iy][ix] = res.history
         dao_hist[iy][ix] = res.dao_history
         reg_hist[iy][ix] = res.registration
+        if reg_zern is not None and res.registration_zernike is not None:
+            reg_zern[iy, ix] = res.registration_zernike
         z = np.asarray(res.zernike, np.float32)
         zern_used[iy, ix, :] = 0
         zern_used[iy, ix, :min(z.size, zern_used.shape[-1])] = z[:zern_used.shape[-1]]
@@ -349,4 +362,5 @@ def reconstruct(views, cfg: SystemConfig, method: str = "isa", zernike=None, fie
         if bar is not None:
             bar.close()
     return Reconstruction(stitcher.out, zern_used, history, block_list, method, cfg, iterations,
-                          n_subsets, time.perf_counter() - t0, solver, dao_hist, reg_hist)
+                          n_subsets, time.perf_counter() - t0, solver, dao_hist, reg_hist,
+                          reg_zern)

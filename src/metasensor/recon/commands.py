@@ -47,7 +47,9 @@ def write_outputs(out: Path, rec, views) -> list[Path]:
                "solver": rec.solver, "iterations": rec.iterations, "subsets": rec.subsets,
                "seconds": rec.seconds,
                "shape": list(image.shape), "history": rec.history,
-               "registration_px": rec.registration}
+               "registration_px": rec.registration,
+               "registration_zernike": (None if rec.registration_zernike is None
+                                        else rec.registration_zernike.tolist())}
     atomic_write_text(out / "summary.json", json.dumps(summary, indent=1))
     c = rec.config.center
     d = rec.config.scan_step_px
