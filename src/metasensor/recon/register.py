@@ -36,10 +36,10 @@ captures, aberration-free, 30 dB; the bank with a defocus error of 0 / 0.025 / 0
 Rounds measured 0.43 -> 0.069 -> 0.019 px r.m.s. (0.05 λ) and 1.75 -> 0.036 -> 0.017 px (0.2 λ);
 a right bank reads 0.014-0.036 px and is left as it is. Cost: one Richardson–Lucy fit
 (5 iterations) per applied round plus one; the registered solve averaged 9.0 s against HQS's
-6.7 s over the benchmark's 192-px cases (+35 %). The
-384-px demo (``make demo``, which registers) moved from SSIM 0.816 to 0.831 (before the wavefront
-fit); its 4 x 4 variant, whose blocks sit between the simulator's 3 x 3 field samples, from PSNR
-11.0 to 17.0 dB. What registration cannot fix is a change of the PSFs' shape beyond a shift, and
+6.7 s over the benchmark's 192-px cases (+35 %). The 384-px demo (``make demo``, which
+registers) moved from SSIM 0.816 to 0.831 (0.830 with the wavefront fit, PSNR 16.83 dB); its
+4 x 4 variant, whose blocks sit between the simulator's 3 x 3 field samples, from PSNR 11.0 to
+17.0 dB. What registration cannot fix is a change of the PSFs' shape beyond a shift, and
 shifts that vary within a block (depth edges, a field aberration that changes across the block).
 
 Opt-in (``reconstruct(register=True)``, ``metasensor reconstruct --register``). On strongly

@@ -50,8 +50,8 @@ class DemoSettings:
     iterations: int | None = 6
     # ISA solver of the meta-imaging row: "hqs" (the sparse-gradient prior, recon.hqs) or "rl"
     # (Richardson-Lucy with ``iterations``); the plain light field (1 x 1 scan) always uses RL.
-    # Measured on this demo: HQS (after view registration) PSNR 16.78 dB, SSIM 0.831, MTF50
-    # centre / edge 0.177 / 0.215 c/px, 95 s in all (unregistered: 16.68 dB, 0.816, 0.186 /
+    # Measured on this demo: HQS (after view registration) PSNR 16.83 dB, SSIM 0.830, MTF50
+    # centre / edge 0.177 / 0.217 c/px, 92 s in all (unregistered: 16.68 dB, 0.816, 0.186 /
     # 0.251, 71 s); RL (6 its) 16.61 dB, 0.608, 0.089 / 0.138. HQS renders bars finer than
     # it resolves (the star's centre, the finest bar groups) flat grey, where RL shows them aliased.
     solver: str = "hqs"
