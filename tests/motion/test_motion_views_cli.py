@@ -107,3 +107,35 @@ def test_parse_scan_order():
         parse_scan_order("[(0, 0), (0, 1)]", 0)
     with pytest.raises(ValueError, match="scan-order"):
         parse_scan_order("[(0, 0), oops]", 5)
+
+
+def test_cli_motion_uses_and_keeps_the_stored_scan_order(tmp_path):
+    # a serpentine capture: without --scan-order the stack's stored order is used (a row-major
+    # guess would misplace its samples), and it is written on with the other stored extras
+    import typer
+
+    from metasensor.io.views import stored_extras
+    from metasensor.motion.commands import register
+    from metasensor.sensor.scan import scan_order
+
+    app = typer.Typer()
+
+    @app.callback()
+    def _group() -> None:
+        pass
+
+    register(app)
+    serp = scan_order(5, "serpentine")
+    sc = scene(0)[:SHAPE[0] * 2, :SHAPE[1] * 2]
+    view, truth = dynamic_view(sc, 2, SHAPE, serp, rigid_motion((1.0, 0.6), REF))
+    views = np.broadcast_to(view, (3, 3, *SHAPE)).astype(np.float32)
+    src = write_views(tmp_path / "views.tif", views,
+                      extra={"scan_order": [list(p) for p in serp], "scale": 2.0})
+    res = CliRunner().invoke(app, ["motion", str(src), "--out", str(tmp_path / "c.tif")])
+    assert res.exit_code == 0, res.output
+    extras = stored_extras(tmp_path / "c.tif")
+    assert [tuple(p) for p in extras["scan_order"]] == serp and extras["scale"] == 2.0
+    out = read_views(tmp_path / "c.tif")
+    expected = correct_motion(views[1, 1], serp)
+    np.testing.assert_array_equal(out[1, 1], expected)
+    assert psnr(out[1, 1], truth, INNER) > psnr(views[1, 1], truth, INNER) + 6

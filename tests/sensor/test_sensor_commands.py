@@ -158,3 +158,29 @@ def test_nan_frames_rejected(tmp_path):
     tifffile.imwrite(tmp_path / "nan.tif", frames)
     res = run("realign", tmp_path / "nan.tif", "--scan", 3, "--out", tmp_path / "v.tif")
     assert res.exit_code != 0 and "NaN" in str(res.exception)
+
+
+def test_realign_takes_config_order_and_moving_stored_in_the_frames(tmp_path):
+    # frames written with this package's description (as `simulate` writes them): a 3 x 3
+    # serpentine scan of a nnum = 9 system, realigned with no options, equals the views
+    import json
+
+    import metasensor as ms
+    from metasensor.io.views import description, stored_extras
+
+    cfg = ms.SystemConfig(nnum=9, mla_pitch=9 * 4.6e-6, mla_focal=9 * 46e-6, scan=3)
+    order = scan_order(3, "serpentine")
+    views = np.random.default_rng(0).integers(0, 4000, (9, 9, 30, 36)).astype(np.uint16)
+    frames = ms.unrealign(views, cfg, order)
+    desc = description(cfg, kind="frames", scan_order=[list(p) for p in order], moving="mla")
+    write_raw(tmp_path / "frames.tif", frames, description=json.dumps(desc))
+    res = run("realign", tmp_path / "frames.tif", "--out", tmp_path / "v.tif")
+    assert res.exit_code == 0, res.output
+    np.testing.assert_array_equal(read_views(tmp_path / "v.tif"), views)
+    assert read_config_from_views(tmp_path / "v.tif") == cfg
+    assert [tuple(p) for p in stored_extras(tmp_path / "v.tif")["scan_order"]] == order
+    # an explicit --order still wins (and, being wrong here, changes the views)
+    res = run("realign", tmp_path / "frames.tif", "--order", "row-major", "--out",
+              tmp_path / "w.tif")
+    assert res.exit_code == 0, res.output
+    assert not np.array_equal(read_views(tmp_path / "w.tif"), views)

@@ -18,7 +18,8 @@ import numpy as np
 from metasensor.config import SystemConfig
 from metasensor.io.atomic import atomic_path
 
-__all__ = ["write_views", "read_views", "read_config_from_views", "description"]
+__all__ = ["write_views", "read_views", "read_config_from_views", "description",
+           "stored_extras"]
 
 
 def description(cfg: SystemConfig | None, **meta) -> dict:
@@ -150,3 +151,23 @@ def read_config_from_views(path: str | Path) -> SystemConfig | None:
     if cfg and not isinstance(cfg, dict):
         raise ValueError(f"{path}: the stored metasensor config is not a table: {cfg!r:.60}")
     return SystemConfig.from_dict(cfg) if cfg else None
+
+
+def stored_extras(path: str | Path) -> dict:
+    """What a TIFF or Zarr written by this package keeps under ``"metasensor"`` in its
+    description (e.g. ``scan_order``, ``moving``), or ``{}`` (none, or not JSON)."""
+    import tifffile
+
+    path = Path(path)
+    try:
+        if path.suffix.lower() == ".zarr":
+            import zarr
+
+            meta = dict(zarr.open_array(str(path), mode="r").attrs)
+        else:
+            with tifffile.TiffFile(path) as tif:
+                meta = json.loads(tif.pages[0].description)
+    except Exception:  # unreadable or no JSON: the caller's defaults apply
+        return {}
+    extra = meta.get("metasensor") if isinstance(meta, dict) else None
+    return extra if isinstance(extra, dict) else {}

@@ -33,9 +33,10 @@ def register(app: typer.Typer) -> None:
     def motion_cmd(
         views: Path = typer.Argument(..., help="input view stack (.tif/.zarr, nnum² pages)"),
         out: Path = typer.Option(..., "--out", "-o", help="output view stack (.tif or .zarr)"),
-        scan_order: str = typer.Option(
-            "row-major", "--scan-order",
-            help='row-major, serpentine, or a list such as "[(0,0),(0,1),...]"'),
+        scan_order: str | None = typer.Option(
+            None, "--scan-order",
+            help='row-major, serpentine, or a list such as "[(0,0),(0,1),...]" (default: the '
+                 "order stored in the stack, else row-major)"),
         period: int = typer.Option(0, "--period",
                                    help="scan period (default: from the stack's config, or 5)"),
         reference: int = typer.Option(-1, "--reference",
@@ -53,7 +54,12 @@ def register(app: typer.Typer) -> None:
         import numpy as np
 
         from metasensor.io.atomic import refuse_overwrite
-        from metasensor.io.views import read_config_from_views, read_views, write_views
+        from metasensor.io.views import (
+            read_config_from_views,
+            read_views,
+            stored_extras,
+            write_views,
+        )
         from metasensor.motion.correct import correct_motion_views
 
         refuse_overwrite([out], [views])
@@ -64,7 +70,11 @@ def register(app: typer.Typer) -> None:
         if cfg is not None and period and period != cfg.scan:
             raise ValueError(f"--period {period} differs from the stack's scan period {cfg.scan}")
         p = period or (cfg.scan if cfg is not None else 0)
-        order = parse_scan_order(scan_order, p)
+        stored = stored_extras(views) if Path(views).exists() else {}
+        if scan_order is None and isinstance(stored.get("scan_order"), list):
+            scan_order = repr([tuple(q) for q in stored["scan_order"]])
+            typer.echo(f"using the scan order stored in {Path(views).name}", err=True)
+        order = parse_scan_order(scan_order or "row-major", p)
         if flow_view in ("centre", "center"):
             fv = None
         elif flow_view == "sharpest":
@@ -81,5 +91,7 @@ def register(app: typer.Typer) -> None:
         ref = None if reference < 0 else reference
         result = correct_motion_views(stack, order, reference=ref, flow_view=fv, mode=mode,
                                       method=method, scatter=scatter)
-        write_views(out, result, cfg, extra={"motion_corrected": True, "scan_order": order})
+        extra = {k: v for k, v in stored.items() if k not in ("kind", "view_shape")}
+        extra.update(motion_corrected=True, scan_order=[list(q) for q in order])
+        write_views(out, result, cfg, extra=extra)
         typer.echo(f"wrote {out}")

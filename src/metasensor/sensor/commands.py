@@ -94,10 +94,13 @@ def realign_cmd(
     out: Path = typer.Option(..., "--out", help="view stack(s) to write (.tif or .zarr)"),
     calib_path: Path | None = typer.Option(None, "--calib", help="calibration TOML (none: "
                                            "frames are already rectified)"),
-    config: Path | None = typer.Option(None, "--config", help="system configuration TOML"),
+    config: Path | None = typer.Option(None, "--config", help="system configuration TOML "
+                                       "(default: the one stored in RAW's description, if any)"),
     scan: int | None = typer.Option(None, "--scan", help="scan period (default: config's)"),
-    order: str | None = typer.Option(None, "--order", help=f"scan order: {_ORDERS}"),
-    moving: str = typer.Option("mla", "--moving", help="what moves during the scan: mla|image"),
+    order: str | None = typer.Option(None, "--order", help=f"scan order: {_ORDERS} (default: "
+                                     "RAW's stored order, else row-major)"),
+    moving: str | None = typer.Option(None, "--moving", help="what moves during the scan: "
+                                      "mla|image (default: RAW's stored value, else mla)"),
     offsets: str = typer.Option("measure", "--offsets", help="per-frame grid offsets: measure "
                                 "(from each frame), calib (stored), nominal"),
     sliding: bool = typer.Option(False, "--sliding", help="one view stack per frame (a sliding "
@@ -134,8 +137,7 @@ def realign_cmd(
     from metasensor.io.atomic import refuse_overwrite
 
     refuse_overwrite([out], [raw_path])
-    cfg = _config(config, scan)
-    phases = _order(order, cfg.scan)
+    cfg, phases, moving = _stored_settings(raw_path, config, scan, order, moving)
     tp = len(phases)
     calib = Calibration.from_toml(calib_path) if calib_path is not None else None
     with open_raw(raw_path) as raw:
@@ -181,6 +183,38 @@ def realign_cmd(
             written.append(path)
     typer.echo(f"-> {written[0]}" + (f" ... {written[-1]} ({len(written)} stacks)"
                                      if len(written) > 1 else ""))
+
+
+def _stored_settings(raw_path: Path, config, scan, order, moving):
+    """(config, scan order, moving) for ``realign``: the options given, else what ``simulate``
+    (or another writer of this package) stored in the raw frames' description, else defaults."""
+    from metasensor.io.views import read_config_from_views, stored_extras
+    from metasensor.sensor.scan import check_scan_order
+
+    stored_cfg = read_config_from_views(raw_path) if config is None and raw_path.is_file() \
+        else None
+    cfg = stored_cfg.replace(scan=scan) if stored_cfg is not None and scan is not None \
+        else (stored_cfg or _config(config, scan))
+    extra = stored_extras(raw_path) if raw_path.is_file() else {}
+    used = []
+    if stored_cfg is not None:
+        used.append("configuration")
+    phases = None
+    if order is None and isinstance(extra.get("scan_order"), list):
+        try:
+            phases = check_scan_order([tuple(p) for p in extra["scan_order"]], cfg.scan)
+            used.append("scan order")
+        except (TypeError, ValueError):
+            phases = None  # stored for another period: the default applies
+    if phases is None:
+        phases = _order(order, cfg.scan)
+    if moving is None:
+        moving = extra.get("moving") if extra.get("moving") in ("mla", "image") else "mla"
+        if "moving" in extra:
+            used.append("moving")
+    if used:
+        typer.echo(f"using the {', '.join(used)} stored in {raw_path.name}", err=True)
+    return cfg, phases, moving
 
 
 def _round_to(frames, dtype):

@@ -20,7 +20,7 @@ def write_capture(cap, out: Path, figure: bool = True, clean: bool = False) -> l
 
     out.mkdir(parents=True, exist_ok=True)
     cfg = cap.config
-    meta = {"scan_order": [list(p) for p in cap.scan_order], "scale": cap.scale,
+    meta = {"scan_order": [list(p) for p in cap.scan_order], "moving": "mla", "scale": cap.scale,
             "gain": cap.noise.gain, "photons": cap.noise.photons,
             "read_noise": cap.noise.read_noise, "bit_depth": cap.noise.bit_depth,
             "snr_db": None if not np.isfinite(cap.snr_db) else cap.snr_db,
