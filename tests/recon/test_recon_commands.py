@@ -84,20 +84,25 @@ def test_cli_system_aberration_file_sets_the_field_map(files):
     from metasensor.recon.system import SystemAberration
 
     grid = np.zeros((2, 2, 45))
-    grid[..., 3] = 0.25  # reported per block (the given PSF bank is used as is)
+    grid[..., 3] = 0.25  # each block's bank is made with it, and it is reported per block
     sa = SystemAberration(zernike=grid, shift_grid=np.zeros((5, 5, 2, 2, 2)), view_shape=(50, 50),
                           config=CFG)
     sa.save(files / "system.h5")
     out = files / "out_sys"
-    res = CliRunner().invoke(app, ["reconstruct", str(files / "views.tif"), "--psf",
-                                   str(files / "psf.h5"), "--blocks", "2x2", "--overlap", "6",
+    res = CliRunner().invoke(app, ["reconstruct", str(files / "views.tif"), "--config",
+                                   str(files / "cfg.toml"), "--blocks", "2x2", "--overlap", "6",
                                    "--iterations", "1", "--system", str(files / "system.h5"),
                                    "--out", str(out)])
     assert res.exit_code == 0, res.output
     np.testing.assert_array_equal(np.load(out / "zernike.npy"), grid)
+    # with a given bank the field map would be ignored: refused
     res = CliRunner().invoke(app, ["reconstruct", str(files / "views.tif"), "--psf",
-                                   str(files / "psf.h5"), "--system", str(files / "none.h5"),
-                                   "--out", str(out)])
+                                   str(files / "psf.h5"), "--system", str(files / "system.h5"),
+                                   "--out", str(files / "out_sys2")])
+    assert res.exit_code != 0 and "not both" in str(res.exception)
+    res = CliRunner().invoke(app, ["reconstruct", str(files / "views.tif"), "--config",
+                                   str(files / "cfg.toml"), "--system", str(files / "none.h5"),
+                                   "--out", str(files / "out_sys3")])
     assert res.exit_code != 0 and "not found" in str(res.exception)
 
 
@@ -160,3 +165,33 @@ def test_reconstruct_rejects_dark_or_negative_banks():
     kept = tiny.copy()
     rec = reconstruct(v, CFG, psf=tiny, iterations=1)
     assert np.isfinite(rec.image).all() and np.array_equal(tiny, kept)
+
+
+def test_psf_bank_and_an_aberration_are_refused_together(files, tmp_path):
+    # --psf is a complete bank: an aberration beside it would be silently ignored
+    res = CliRunner().invoke(app, ["reconstruct", str(files / "views.tif"), "--psf",
+                                   str(files / "psf.h5"), "--zernike", "4:0.5", "--out",
+                                   str(tmp_path / "r")])
+    assert res.exit_code != 0 and "not both" in str(res.exception)
+    import metasensor as ms
+
+    bank, cfg = read_psf_file(files / "psf.h5")
+    views = np.zeros((cfg.nnum, cfg.nnum, 8, 8), np.float32)
+    with pytest.raises(ValueError, match="not both"):
+        ms.reconstruct(views, cfg, psf=bank, zernike=[0, 0, 0, 0.5])
+    with pytest.raises(ValueError, match="DAO"):
+        ms.reconstruct(views, cfg, psf=bank, method="wave")
+
+
+def test_psf_bank_zernike_attribute_is_what_zernike_npy_records(files, tmp_path):
+    src = files / "psf.h5"
+    bank_file = tmp_path / "psf_z.h5"
+    with h5py.File(src, "r") as f, h5py.File(bank_file, "w") as g:
+        g.create_dataset("psf", data=f["psf"][...])
+        g.attrs["config"] = f.attrs["config"]
+        g.attrs["zernike"] = np.array([0, 0, 0, 0.3])
+    res = CliRunner().invoke(app, ["reconstruct", str(files / "views.tif"), "--psf",
+                                   str(bank_file), "--iterations", "1", "--out",
+                                   str(tmp_path / "r")])
+    assert res.exit_code == 0, res.output
+    np.testing.assert_allclose(np.load(tmp_path / "r" / "zernike.npy"), [[[0, 0, 0, 0.3]]])

@@ -63,7 +63,7 @@ class Reconstruction:
     """Result of :func:`reconstruct`."""
 
     image: Any  # (H, W) float32 ndarray (or the zarr/TIFF-backed array written to ``out``)
-    zernike: np.ndarray  # (by, bx, J) Noll vectors in waves
+    zernike: np.ndarray  # (by, bx, J) Noll vectors in waves (zeros with a given psf bank)
     history: list  # [by][bx] -> list of per-iteration residuals
     blocks: list[Block]
     method: str
@@ -264,6 +264,13 @@ def reconstruct(views, cfg: SystemConfig, method: str = "isa", zernike=None, fie
         raise TypeError(f"cfg must be a SystemConfig, got {type(cfg).__name__}")
     if method not in _METHODS:
         raise ValueError(f"method must be one of {_METHODS}, got {method!r}")
+    if psf is not None and method != "isa":
+        raise ValueError(f"method={method!r} builds each block's bank from its DAO estimate; a "
+                         "given psf would be used unchanged: pass psf_fn, or method='isa'")
+    if psf is not None and (field_zernike is not None or (
+            zernike is not None and np.any(np.asarray(zernike, dtype=float)))):
+        raise ValueError("psf is a complete PSF bank, so zernike/field_zernike would be ignored: "
+                         "give the aberration or the bank, not both")
     views = _check_views(views, cfg)
     try:
         by, bx = (int(blocks[0]), int(blocks[1]))

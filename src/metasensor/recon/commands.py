@@ -25,6 +25,16 @@ def read_psf_file(path: Path):
     return bank, cfg
 
 
+def _bank_zernike(path: Path) -> np.ndarray | None:
+    """The Noll vector a ``metasensor psf`` bank was made with (its ``zernike`` attribute)."""
+    import h5py
+
+    with h5py.File(path, "r") as f:  # attributes only (read_psf_file checked the file)
+        attrs = dict(f["psf"].attrs) | dict(f.attrs)
+    z = np.asarray(attrs.get("zernike", np.zeros(0)), dtype=np.float64).ravel()
+    return z if z.size and np.isfinite(z).all() else None
+
+
 def write_outputs(out: Path, rec, views) -> list[Path]:
     """image.tif (float32, config JSON in the description), zernike.npy, summary.json and a PNG."""
     import matplotlib
@@ -161,6 +171,9 @@ def register(app: typer.Typer) -> None:
 
         if psf is not None and config is not None:
             raise ValueError("give either --psf or --config, not both")
+        if psf is not None and (zernike or field_zernike is not None or system is not None):
+            raise ValueError("--psf is a complete PSF bank: --zernike/--field-zernike/--system "
+                             "would be ignored; give the aberration or the bank, not both")
         if not views.exists():
             raise FileNotFoundError(f"view stack not found: {views}")
         from metasensor.io.atomic import refuse_overwrite
@@ -224,6 +237,16 @@ def register(app: typer.Typer) -> None:
             import zarr
 
             rec.image = zarr.open_array(str(final), mode="r")
+        if psf is not None:  # record the aberration the given bank was made with, if stored
+            z = _bank_zernike(psf)
+            if z is not None:
+                rec.zernike = np.zeros(rec.zernike.shape[:2] + (z.size,), np.float32) + z
         written = write_outputs(out, rec, stack)
+        if rec.registration_zernike is not None:
+            applied = np.any(rec.registration_zernike != 0, axis=-1)
+            worst = float(np.abs(rec.registration_zernike).max())
+            typer.echo(f"registration: PSF banks moved in {int(applied.sum())} of {applied.size} "
+                       f"block(s) (largest wavefront term {worst:.3f} λ; registration_px and "
+                       "registration_zernike in summary.json)")
         typer.echo(f"reconstructed {rec.image.shape[0]}x{rec.image.shape[1]} px in "
                    f"{rec.seconds:.1f} s -> {', '.join(str(p) for p in written)}")
