@@ -49,8 +49,15 @@ def test_reconstruct_cli_writes_image_and_figure(files):
     assert np.load(out / "zernike.npy").shape == (2, 2, 45)
     import zarr
 
-    np.testing.assert_array_equal(np.asarray(zarr.open_array(str(out / "image.zarr"))[:]), img)
+    stored = zarr.open_array(str(out / "image.zarr"))
+    np.testing.assert_array_equal(np.asarray(stored[:]), img)
+    assert SystemConfig.from_dict(dict(stored.attrs)) == CFG  # the config, as image.tif has
     assert hashlib.sha256((files / "views.tif").read_bytes()).hexdigest() == before
+    # the same folder again without --zarr: the earlier image.zarr would contradict image.tif
+    res = CliRunner().invoke(app, ["reconstruct", str(files / "views.tif"), "--psf",
+                                   str(files / "psf.h5"), "--iterations", "1", "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    assert not (out / "image.zarr").exists()
 
 
 def test_cli_errors(files):

@@ -41,6 +41,13 @@ def test_cli_writes_a_capture(tmp_path, standin):
     assert wf["zernike"][3] == 0.3 and wf["zernike"][5] == 0.2
     meta = json.loads((out / "capture.json").read_text())
     assert abs(meta["snr_db"] - 25) < 0.5
+    # the same folder again, aberration-free: the earlier wavefront.npy would contradict the
+    # new wavefront.json, so it goes; files that are not the capture's stay
+    (out / "notes.txt").write_text("mine")
+    res = _run(["--scene", "chart", "--size", "70", "--scan", "3", "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    assert not (out / "wavefront.npy").exists() and (out / "notes.txt").read_text() == "mine"
+    assert json.loads((out / "wavefront.json").read_text())["zernike"] is None
 
 
 def test_cli_bad_input(tmp_path, standin):

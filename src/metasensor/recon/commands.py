@@ -231,12 +231,18 @@ def register(app: typer.Typer) -> None:
                 shutil.rmtree(partial, ignore_errors=True)
             raise
         if target is not None:
+            from metasensor.io.views import description
+
+            target.attrs.update(description(cfg, kind="image", method=rec.method))
             final = out / "image.zarr"
             shutil.rmtree(final, ignore_errors=True)
             os.replace(partial, final)
             import zarr
 
             rec.image = zarr.open_array(str(final), mode="r")
+        elif (out / "image.zarr").is_dir():  # an earlier --zarr run's image: not this one
+            shutil.rmtree(out / "image.zarr")
+            typer.echo(f"removed {out / 'image.zarr'} of an earlier run", err=True)
         if psf is not None:  # record the aberration the given bank was made with, if stored
             z = _bank_zernike(psf)
             if z is not None:

@@ -61,7 +61,17 @@ def write_capture(cap, out: Path, figure: bool = True, clean: bool = False) -> l
     written.append(atomic_write_text(out / "capture.json", json.dumps(meta, indent=1)))
     if figure:
         written.append(capture_figure(cap, out / "figure.png"))
+    # a capture written over an earlier one: that run's files this one did not write would
+    # contradict it (e.g. an old wavefront.npy beside a new aberration-free wavefront.json)
+    for name in CAPTURE_FILES:
+        if out / name not in written and (out / name).is_file():
+            (out / name).unlink()
     return written
+
+
+CAPTURE_FILES = ("frames.tif", "views.tif", "views_clean.tif", "truth.tif", "sensor2d.tif",
+                 "hardware_ao.tif", "wavefront.json", "wavefront.npy", "phase_screens.npy",
+                 "config.toml", "capture.json", "figure.png")
 
 
 def capture_figure(cap, path: Path) -> Path:
