@@ -45,6 +45,20 @@ def test_parse_zernike():
             parse_zernike(bad)
 
 
+def test_parse_zernike_reads_a_noll_vector_file(tmp_path):
+    # simulate's wavefront.npy, passed on to reconstruct --zernike
+    np.save(tmp_path / "w.npy", np.array([0, 0, 0, 0.4, 0.1]))
+    np.testing.assert_array_equal(parse_zernike(str(tmp_path / "w.npy")), [0, 0, 0, 0.4, 0.1])
+    np.save(tmp_path / "grid.npy", np.zeros((2, 2, 5)))
+    with pytest.raises(ValueError, match="1-D Noll vector"):
+        parse_zernike(str(tmp_path / "grid.npy"))
+    with pytest.raises(FileNotFoundError, match="zernike"):
+        parse_zernike(str(tmp_path / "none.npy"))
+    (tmp_path / "bad.npy").write_bytes(b"junk")
+    with pytest.raises(ValueError, match="not a readable"):
+        parse_zernike(str(tmp_path / "bad.npy"))
+
+
 def test_psf_command_writes_bank_and_figure(tiny_cfg_file, tmp_path):
     cfg, path = tiny_cfg_file
     before = path.read_text()

@@ -19,9 +19,23 @@ __all__ = ["save_psf", "load_psf", "plot_views", "parse_zernike"]
 
 
 def parse_zernike(text: str | None) -> np.ndarray | None:
-    """``"4:0.5,7:-0.2"`` -> Noll vector (waves) with z[3] = 0.5, z[6] = -0.2; "" -> None."""
+    """``"4:0.5,7:-0.2"`` -> Noll vector (waves) with z[3] = 0.5, z[6] = -0.2; "" -> None.
+    A path to a ``.npy`` file holding a 1-D Noll vector (e.g. ``simulate``'s ``wavefront.npy``)
+    is read as that vector."""
     if text is None or not text.strip():
         return None
+    if text.strip().lower().endswith(".npy"):
+        path = Path(text.strip())
+        if not path.is_file():
+            raise FileNotFoundError(f"--zernike file not found: {path}")
+        try:
+            z = np.load(path, allow_pickle=False)
+        except (OSError, ValueError) as exc:
+            raise ValueError(f"--zernike {path}: not a readable .npy file ({exc})") from None
+        if z.ndim != 1 or z.size == 0 or not np.isfinite(z).all():
+            raise ValueError(f"--zernike {path}: expected a finite 1-D Noll vector, got shape "
+                             f"{z.shape}")
+        return np.asarray(z, dtype=np.float64)
     coeffs: dict[int, float] = {}
     for item in text.split(","):
         item = item.strip()

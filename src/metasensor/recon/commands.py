@@ -150,7 +150,8 @@ def register(app: typer.Typer) -> None:
             help="register the views against the PSF bank first (for banks that may be off)"),
         iterations: int | None = typer.Option(None, help="Richardson-Lucy iterations"),
         subsets: int | None = typer.Option(None, help="view subsets per iteration"),
-        zernike: str | None = typer.Option(None, help="global aberration, e.g. '4:0.5,7:-0.2'"),
+        zernike: str | None = typer.Option(None, help="global aberration, e.g. '4:0.5,7:-0.2', "
+                                            "or a .npy Noll vector (simulate's wavefront.npy)"),
         field_zernike: Path | None = typer.Option(
             None, "--field-zernike", help=".npy (by, bx, J) Noll vectors over the field"),
         scheduler: str | None = typer.Option(None, help="dask scheduler address tcp://host:port"),
