@@ -101,7 +101,15 @@ def test_realign_sliding_window_writes_one_stack_per_frame(capture):
     files = sorted((root / "slide").glob("v_*.tif"))
     assert len(files) == 13 - 9 + 1
     first = read_views(files[0])
-    assert first.dtype == np.uint16 and first.shape[:2] == (N, N)
+    assert first.dtype == np.float32 and first.shape[:2] == (N, N)  # --dtype float32 default
+    res = run("realign", root / "raw.tif", "--scan", 3, "--order", "serpentine", "--dtype",
+              "input", "--out", root / "v_input.tif")  # the raw type: half the bytes, same values
+    assert res.exit_code == 0, res.output
+    same = read_views(root / "v_input.tif")
+    run("realign", root / "raw.tif", "--scan", 3, "--order", "serpentine", "--out",
+        root / "v_float.tif")
+    assert same.dtype == np.uint16
+    np.testing.assert_array_equal(same, read_views(root / "v_float.tif"))
 
 
 def test_realign_bad_inputs(capture, tmp_path):

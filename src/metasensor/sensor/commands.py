@@ -109,8 +109,9 @@ def realign_cmd(
     method: str = typer.Option("lanczos", "--method", help="interpolator: lanczos|spline|cubic"),
     apply_flat: bool = typer.Option(False, "--flat", help="divide by the calibration's flat "
                                     "field"),
-    dtype: str = typer.Option("float32", "--dtype", help="rectified views: float32, or input "
-                              "(round back to the raw integer type: half the memory)"),
+    dtype: str = typer.Option("float32", "--dtype", help="views: float32, or input (the raw "
+                              "integer type, rectified views rounded back: half the memory; "
+                              "--flat always gives float32)"),
 ) -> None:
     """Realign raw frames into view stacks (page u*nnum + v = view (u, v)).
 
@@ -178,6 +179,8 @@ def realign_cmd(
             if flat is not None:
                 views = np.where(flat > 0.05, views / np.maximum(flat, 0.05), 0).astype(
                     np.float32)
+            elif dtype == "float32" and views.dtype != np.float32:
+                views = views.astype(np.float32)  # exact for raw data up to 24 bits
             path = out if n_out == 1 else out.with_name(f"{out.stem}_{k:05d}{out.suffix}")
             write_views(path, views, cfg, extra={**meta, "window": k})
             written.append(path)
