@@ -202,3 +202,17 @@ def test_psf_bank_zernike_attribute_is_what_zernike_npy_records(files, tmp_path)
                                    str(tmp_path / "r")])
     assert res.exit_code == 0, res.output
     np.testing.assert_allclose(np.load(tmp_path / "r" / "zernike.npy"), [[[0, 0, 0, 0.3]]])
+
+
+def test_config_that_resamples_the_stored_views_is_refused(files, tmp_path):
+    # views stored with scan 5; a --config with scan 1 would reconstruct another grid silently
+    CFG.replace(scan=1).to_toml(tmp_path / "scan1.toml")
+    res = CliRunner().invoke(app, ["reconstruct", str(files / "views.tif"), "--config",
+                                   str(tmp_path / "scan1.toml"), "--out", str(tmp_path / "r")])
+    assert res.exit_code != 0 and "scan" in str(res.exception)
+    # another difference (the NA) is the user's to make: it runs and names it
+    CFG.replace(na=0.04).to_toml(tmp_path / "na.toml")
+    res = CliRunner().invoke(app, ["reconstruct", str(files / "views.tif"), "--config",
+                                   str(tmp_path / "na.toml"), "--iterations", "1", "--out",
+                                   str(tmp_path / "r2")])
+    assert res.exit_code == 0, res.output
