@@ -97,3 +97,16 @@ def test_simulator_resolution_chart():
     assert np.all(np.abs(fm.mtf50 - 0.603) < 0.03)
     s = fm.summary()  # no ROI within 1/3 of the centre (the star is there): nearest group used
     assert s["n_centre"] >= 1 and s["centre_radius"] < s["edge_radius"]
+
+
+def test_mtf50_above_nyquist_is_counted_and_flagged():
+    from metasensor.metrics.evaluation import _summary_text
+    from metasensor.metrics.field import FieldMTF
+
+    fm = FieldMTF(rois=np.zeros((3, 4), int), centres=np.zeros((3, 2)),
+                  radius=np.array([0.1, 0.5, 0.9]), mtf50=np.array([0.3, 0.62, np.nan]),
+                  results=[None] * 3, errors=[None] * 3, shape=(100, 100))
+    s = fm.summary()
+    assert s["n_above_nyquist"] == 1 and s["n_measured"] == 2
+    text = _summary_text({"shape": (100, 100), "field": s})
+    assert "above Nyquist" in text and "field radius" in text

@@ -125,7 +125,13 @@ def _summary_text(result: dict) -> str:
 
         lines.append(f"MTF ROIs: {f['n_rois']} ({f['n_measured']} measured)")
         lines.append(f"MTF50 centre: {g('centre_mtf50')} cycles/pixel   edge: {g('edge_mtf50')}"
-                     f"   edge/centre: {g('edge_over_centre')}")
+                     f"   edge/centre: {g('edge_over_centre')}"
+                     + (f"   (field radius {f['centre_radius']:.2f} / {f['edge_radius']:.2f})"
+                        if "centre_radius" in f else ""))
+        if f.get("n_above_nyquist"):
+            lines.append(f"note: {f['n_above_nyquist']} ROI(s) read MTF50 above Nyquist "
+                         "(0.5 cycles/pixel): edges sharpened past what the pixels sample "
+                         "(a prior or ringing), not resolved detail")
         if "centre_mtf50_lpmm" in f:
             lines.append(f"MTF50 centre: {g('centre_mtf50_lpmm')} lp/mm   edge: "
                          f"{g('edge_mtf50_lpmm')} lp/mm")

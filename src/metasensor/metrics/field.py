@@ -187,7 +187,10 @@ class FieldMTF:
         smallest (largest) measured radius. ``centre_radius`` / ``edge_radius`` say where.
         """
         ok = np.isfinite(self.mtf50)
-        out: dict = {"n_rois": int(len(self.mtf50)), "n_measured": int(ok.sum())}
+        # above Nyquist (0.5 cycles/pixel) an MTF50 says the edge was sharpened past what the
+        # pixels sample (a reconstruction prior, ringing), not that the detail is resolved
+        out: dict = {"n_rois": int(len(self.mtf50)), "n_measured": int(ok.sum()),
+                     "n_above_nyquist": int(np.sum(self.mtf50[ok] > 0.5))}
         if not ok.any():
             out.update(centre_mtf50=float("nan"), edge_mtf50=float("nan"),
                        edge_over_centre=float("nan"))
