@@ -73,6 +73,7 @@ def run_depth(views: Path, out: Path, system: Path | None = None, config: Path |
                                                             float(res.candidates[-1]),
                                                             len(res.candidates)],
                "median_disparity": float(np.median(res.disparity)),
+               "disparity_p5_p95": [float(v) for v in np.percentile(res.disparity, [5, 95])],
                "mean_confidence": float(res.confidence.mean()), "files": written}
     atomic_write_text(out / "depth.json", json.dumps(summary, indent=2))
     return summary
@@ -83,7 +84,7 @@ def register(app: typer.Typer) -> None:
 
     @app.command("depth")
     def depth(
-        views: Path = typer.Argument(..., help="view stack (.tif/.zarr, interface.md layout)"),
+        views: Path = typer.Argument(..., help="view stack (.tif pages u*nnum+v, or .zarr)"),
         out: Path = typer.Option(..., "--out", "-o", help="output folder"),
         system: Path | None = typer.Option(None, "--system",
                                            help="system-aberration calibration (system.h5)"),
@@ -109,4 +110,8 @@ def register(app: typer.Typer) -> None:
         summary = run_depth(views, out, system=system, config=config, candidates=candidates,
                             disparity_range=disparity_range, occlusion=occlusion, radius=radius,
                             device=device)
-        typer.echo(f"depth maps ({summary['depth_kind']} depth) written to {out}")
+        lo, hi = summary["disparity_p5_p95"]
+        typer.echo(f"disparity median {summary['median_disparity']:+.3f} (5-95 %: {lo:+.3f} .. "
+                   f"{hi:+.3f}) view px per view step, mean confidence "
+                   f"{summary['mean_confidence']:.2f}; {summary['depth_kind']} depth maps and "
+                   f"figure written to {out}")
