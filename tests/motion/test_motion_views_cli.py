@@ -89,6 +89,7 @@ def test_cli_motion(tmp_path):
     assert src.read_bytes() == before  # input untouched
     out = read_views(tmp_path / "corrected.tif")
     assert out.shape == views.shape
+    assert (tmp_path / "corrected.png").stat().st_size > 1000  # before / after / difference
     assert psnr(out[1, 1], truth[1, 1], INNER) > psnr(views[1, 1], truth[1, 1], INNER) + 6
     res = CliRunner().invoke(app, ["motion", "--help"])
     assert "Example" in res.output
