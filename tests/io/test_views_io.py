@@ -79,3 +79,15 @@ def test_description_is_the_configuration_as_json_and_old_layouts_still_read(tmp
         tifffile.imwrite(other, views.reshape(9, 4, 4), photometric="minisblack",
                          description=text, metadata=None)
         assert read_config_from_views(other) == cfg
+
+
+def test_a_given_config_must_sample_like_the_stored_one(tmp_path, capsys):
+    from metasensor.io.views import check_against_stored
+
+    cfg = ms.SystemConfig(nnum=3, scan=3)
+    with pytest.raises(ValueError, match="scan = 1 but .* scan = 3"):
+        check_against_stored(cfg.replace(scan=1), cfg, tmp_path / "c.toml", tmp_path / "v.tif")
+    check_against_stored(cfg.replace(na=0.04), cfg, tmp_path / "c.toml", tmp_path / "v.tif")
+    assert "na" in capsys.readouterr().err
+    check_against_stored(cfg, cfg, tmp_path / "c.toml", tmp_path / "v.tif")
+    assert capsys.readouterr().err == ""

@@ -32,13 +32,16 @@ def run_depth(views: Path, out: Path, system: Path | None = None, config: Path |
     from metasensor.depth.estimate import estimate_depth
     from metasensor.depth.figure import depth_figure
     from metasensor.io.atomic import atomic_path, atomic_write_text
-    from metasensor.io.views import read_config_from_views, read_views
+    from metasensor.io.views import check_against_stored, read_config_from_views, read_views
 
     views = Path(views)
     if not views.exists():
         raise FileNotFoundError(f"view stack not found: {views}")
     if config is not None:
         cfg = SystemConfig.from_toml(config)
+        stored = read_config_from_views(views)
+        if stored is not None:
+            check_against_stored(cfg, stored, Path(config), views)
     else:
         cfg = read_config_from_views(views)
         if cfg is None:

@@ -19,7 +19,7 @@ from metasensor.config import SystemConfig
 from metasensor.io.atomic import atomic_path
 
 __all__ = ["write_views", "read_views", "read_config_from_views", "description",
-           "stored_extras"]
+           "stored_extras", "check_against_stored"]
 
 
 def description(cfg: SystemConfig | None, **meta) -> dict:
@@ -171,3 +171,20 @@ def stored_extras(path: str | Path) -> dict:
         return {}
     extra = meta.get("metasensor") if isinstance(meta, dict) else None
     return extra if isinstance(extra, dict) else {}
+
+
+def check_against_stored(cfg, stored, source: Path, views: Path) -> None:
+    """A configuration ``cfg`` (from ``source``) given for views that store their own
+    (``stored``): a different sampling (nnum, scan) would silently process the wrong grid, so it
+    is refused; other differences (e.g. a
+    corrected NA) are the user's to make, and are named on stderr."""
+    for name in ("nnum", "scan"):
+        if getattr(cfg, name) != getattr(stored, name):
+            raise ValueError(f"{source}: {name} = {getattr(cfg, name)} but {views} was captured "
+                             f"with {name} = {getattr(stored, name)}")
+    diff = [k for k, v in cfg.to_dict().items() if stored.to_dict().get(k) != v]
+    if diff:
+        import sys
+
+        print(f"note: {source} differs from the configuration stored in {Path(views).name} in "
+              f"{', '.join(diff)}; using {Path(source).name}'s", file=sys.stderr)

@@ -35,20 +35,6 @@ def _bank_zernike(path: Path) -> np.ndarray | None:
     return z if z.size and np.isfinite(z).all() else None
 
 
-def _check_against_stored(cfg, stored, source: Path, views: Path) -> None:
-    """A configuration given for views that store their own: a different sampling (nnum, scan)
-    would silently reconstruct the wrong grid, so it is refused; other differences (e.g. a
-    corrected NA) are the user's to make, and are named on stderr."""
-    for name in ("nnum", "scan"):
-        if getattr(cfg, name) != getattr(stored, name):
-            raise ValueError(f"{source}: {name} = {getattr(cfg, name)} but {views} was captured "
-                             f"with {name} = {getattr(stored, name)}")
-    diff = [k for k, v in cfg.to_dict().items() if stored.to_dict().get(k) != v]
-    if diff:
-        typer.echo(f"note: {source} differs from the configuration stored in {views.name} in "
-                   f"{', '.join(diff)}; using {source.name}'s", err=True)
-
-
 def write_outputs(out: Path, rec, views) -> list[Path]:
     """image.tif (float32, config JSON in the description), zernike.npy, summary.json and a PNG."""
     import matplotlib
@@ -180,7 +166,7 @@ def register(app: typer.Typer) -> None:
         With DAO: metasensor reconstruct views.tif --dao wave --system system.h5 --out result/
         """
         from metasensor.config import SystemConfig
-        from metasensor.io.views import read_config_from_views, read_views
+        from metasensor.io.views import check_against_stored, read_config_from_views, read_views
         from metasensor.optics.psf_io import parse_zernike
         from metasensor.recon.api import reconstruct
 
@@ -206,7 +192,7 @@ def register(app: typer.Typer) -> None:
         if psf is not None and stored is not None and cfg.scan != stored.scan:
             cfg = cfg.replace(scan=stored.scan)  # a bank does not depend on the scan
         if cfg is not None and stored is not None:
-            _check_against_stored(cfg, stored, psf or config, views)
+            check_against_stored(cfg, stored, psf or config, views)
         if cfg is None:
             cfg = stored
         if cfg is None:

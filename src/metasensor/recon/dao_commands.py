@@ -44,7 +44,7 @@ def register(app: typer.Typer) -> None:
         Example: metasensor calibrate-aberration checker_views.tif --out system.h5 --blocks 4x4
         """
         from metasensor.config import SystemConfig
-        from metasensor.io.views import read_config_from_views, read_views
+        from metasensor.io.views import check_against_stored, read_config_from_views, read_views
         from metasensor.recon.system import calibrate_system, plot_wavefront_map
 
         if not capture.exists():
@@ -56,8 +56,10 @@ def register(app: typer.Typer) -> None:
             raise ValueError(f"--iterations must be >= 1, got {iterations}")
         if not 0.0 < threshold < 1.0:
             raise ValueError(f"--threshold must lie in (0, 1), got {threshold}")
-        cfg = SystemConfig.from_toml(config) if config is not None else \
-            read_config_from_views(capture)
+        stored = read_config_from_views(capture)
+        cfg = SystemConfig.from_toml(config) if config is not None else stored
+        if config is not None and stored is not None:
+            check_against_stored(cfg, stored, config, capture)
         if cfg is None:
             raise ValueError(f"{capture} carries no system configuration: pass --config")
         views = read_views(capture, nnum=cfg.nnum)
