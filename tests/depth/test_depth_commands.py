@@ -62,6 +62,8 @@ def test_depth_command_writes_maps_and_figure(views_file, tmp_path, monkeypatch)
     assert meta["unit"].startswith("m ")
     summary = json.loads((out / "depth.json").read_text())
     assert summary["depth_kind"] == "object"
+    lo, hi = summary["disparity_p5_p95"]
+    assert lo <= summary["median_disparity"] <= hi
     png = (out / "depth.png").read_bytes()
     assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 10_000
 
@@ -82,3 +84,11 @@ def test_depth_command_bad_input(views_file, tmp_path, monkeypatch, capsys):
     tifffile.imwrite(bare, np.ones((225, 8, 8), np.float32))
     assert _main(["depth", str(bare), "--out", str(tmp_path / "o")], monkeypatch) == 2
     assert "--config" in capsys.readouterr().err
+
+
+def test_depth_config_must_sample_like_the_stack(views_file, tmp_path, monkeypatch, capsys):
+    path, _ = views_file
+    ms.SystemConfig(scan=3).to_toml(tmp_path / "scan3.toml")
+    assert _main(["depth", str(path), "--config", str(tmp_path / "scan3.toml"), "--out",
+                  str(tmp_path / "o")], monkeypatch) == 2
+    assert "scan = 3" in capsys.readouterr().err

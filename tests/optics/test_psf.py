@@ -322,3 +322,16 @@ def test_cache_keeps_under_its_size_cap_evicting_least_recently_used(monkeypatch
     for key in "xyz":
         psf_cache.store(key, big, tmp_path)
     assert len(list((tmp_path / "psf").glob("*.npy"))) == 4
+
+
+def test_cache_eviction_leaves_files_being_written(monkeypatch, tmp_path):
+    # another process's ".key.XXXX.npy" (written, not yet renamed) is not the cache's to evict
+    arr = np.zeros(2**18, np.float32)
+    monkeypatch.setenv("METASENSOR_CACHE_MAX_GB", str(1.5 / 1024))
+    (tmp_path / "psf").mkdir()
+    partial = tmp_path / "psf" / ".other.abc123.npy"
+    np.save(partial, arr)
+    psf_cache.store("a", arr, tmp_path)
+    psf_cache.store("b", arr, tmp_path)
+    assert partial.exists()
+    assert sorted(f.stem for f in (tmp_path / "psf").glob("[!.]*.npy")) == ["b"]

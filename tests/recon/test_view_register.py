@@ -172,3 +172,19 @@ def test_wavefront_registration_stops_at_shifts_no_wavefront_explains(bank, monk
     assert len(reg.explained) == 1 and reg.explained[0] < reg_mod.MIN_EXPLAINED
     assert len(reg.misfits) == 1  # no candidate was fitted
     assert torch.equal(reg.psf, bank) and float(reg.shifts.abs().sum()) == 0.0
+
+
+def test_few_views_register_without_the_wavefront_fit(bank):
+    # 9 views cannot fit 18 modes: the shifts are used as measured (no error)
+    from metasensor.recon.register import MIN_FIT_VIEWS
+
+    cfg = ms.SystemConfig()
+    u, v = np.nonzero(cfg.view_mask())
+    keep = np.argsort((u - 7) ** 2 + (v - 7) ** 2, kind="stable")[:9]
+    assert keep.size < MIN_FIT_VIEWS
+    sub = bank[torch.from_numpy(keep)]
+    true = torch.tensor(np.stack([u[keep] - 7, v[keep] - 7], axis=1) * 0.3, dtype=torch.float64)
+    window = _shifted_window(sub, true, s=30)
+    reg = register_views(sub, window, 3, device="cpu", cfg=cfg,
+                         uv=list(zip(u[keep], v[keep], strict=True)))
+    assert reg.zernike is None and reg.explained == [] and reg.history[0] > 0.1

@@ -102,6 +102,13 @@ def test_realign_sliding_window_writes_one_stack_per_frame(capture):
     assert len(files) == 13 - 9 + 1
     first = read_views(files[0])
     assert first.dtype == np.float32 and first.shape[:2] == (N, N)  # --dtype float32 default
+    # each window stores the phases in the order its frames were taken (for motion correction)
+    from metasensor.io.views import stored_extras
+
+    order = capture["order"]
+    for k in (0, 1, 4):
+        taken = [tuple(q) for q in stored_extras(files[k])["scan_order"]]
+        assert taken == order[k:] + order[:k], k
     res = run("realign", root / "raw.tif", "--scan", 3, "--order", "serpentine", "--dtype",
               "input", "--out", root / "v_input.tif")  # the raw type: half the bytes, same values
     assert res.exit_code == 0, res.output
@@ -192,3 +199,26 @@ def test_realign_takes_config_order_and_moving_stored_in_the_frames(tmp_path):
               tmp_path / "w.tif")
     assert res.exit_code == 0, res.output
     assert not np.array_equal(read_views(tmp_path / "w.tif"), views)
+
+
+def test_config_checks_against_what_the_frames_store(tmp_path):
+    # frames stored as a 3 x 3 scan: --scan 5 cannot realign them; an unreadable stored
+    # configuration is ignored when --config is given
+    import json
+
+    import metasensor as ms
+    from metasensor.io.views import description
+
+    cfg = ms.SystemConfig(nnum=15, scan=3)
+    frames = np.zeros((9, 60, 60), np.uint16)
+    write_raw(tmp_path / "f.tif", frames, description=json.dumps(description(cfg)))
+    res = run("realign", tmp_path / "f.tif", "--scan", 5, "--out", tmp_path / "v.tif")
+    assert res.exit_code != 0 and "scan" in str(res.exception)
+    stale = {"metasensor": {"config": {**cfg.to_dict(), "old_field": 1}}}
+    write_raw(tmp_path / "g.tif", frames, description=json.dumps(stale))
+    cfg.to_toml(tmp_path / "c.toml")
+    res = run("realign", tmp_path / "g.tif", "--config", tmp_path / "c.toml", "--out",
+              tmp_path / "w.tif")
+    assert res.exit_code == 0, res.output
+    res = run("realign", tmp_path / "g.tif", "--out", tmp_path / "x.tif")
+    assert res.exit_code != 0 and "old_field" in str(res.exception)

@@ -39,7 +39,7 @@ def run_depth(views: Path, out: Path, system: Path | None = None, config: Path |
         raise FileNotFoundError(f"view stack not found: {views}")
     if config is not None:
         cfg = SystemConfig.from_toml(config)
-        stored = read_config_from_views(views)
+        stored = read_config_from_views(views, strict=False)
         if stored is not None:
             check_against_stored(cfg, stored, Path(config), views)
     else:

@@ -121,8 +121,19 @@ def read_views(path: str | Path, nnum: int | None = None, mmap: bool = False) ->
     return pages.reshape(nnum, nnum, *pages.shape[1:])
 
 
-def read_config_from_views(path: str | Path) -> SystemConfig | None:
-    """The SystemConfig stored in a view stack's metadata, or ``None``."""
+def read_config_from_views(path: str | Path, strict: bool = True) -> SystemConfig | None:
+    """The SystemConfig stored in a view stack's metadata, or ``None``. ``strict=False``: a
+    stored configuration that cannot be read (an older version's field, a foreign description)
+    is named on stderr and counts as none (for callers given a configuration of their own)."""
+    if not strict:
+        try:
+            return read_config_from_views(path)
+        except ValueError as exc:  # ConfigError is a ValueError
+            import sys
+
+            print(f"note: ignoring the configuration stored in {Path(path).name}: {exc}",
+                  file=sys.stderr)
+            return None
     import tifffile
 
     path = Path(path)

@@ -70,7 +70,7 @@ def _evict(root: Path, keep: Path, limit: float) -> int:
     """Remove the least recently used ``*.npy`` in ``root`` (not ``keep``) until the folder's
     banks fit in ``limit`` bytes; returns how many were removed."""
     entries = []
-    for f in root.glob("*.npy"):
+    for f in root.glob("[!.]*.npy"):  # not the ".key.XXXX.npy" files being written now
         with contextlib.suppress(OSError):
             st = f.stat()
             entries.append((st.st_mtime, st.st_size, f))

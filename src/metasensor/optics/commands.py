@@ -16,7 +16,8 @@ def register(app: typer.Typer) -> None:
         out: Path = typer.Option(..., "--out",
                                  help="output HDF5 file (dataset 'psf', axes u, v, y, x)"),
         zernike: str = typer.Option("", "--zernike",
-                                    help="Noll index:waves pairs, e.g. '4:0.5,7:-0.2'"),
+                                    help="Noll index:waves pairs, e.g. '4:0.5,7:-0.2', or a .npy "
+                                         "Noll vector"),
         depth: float = typer.Option(0.0, "--depth", help="defocus on the image side, metres"),
         subsample: int = typer.Option(1, "--subsample", help="point positions per pixel (1, 3)"),
         size: int = typer.Option(0, "--size", help="PSF window K in pixels (odd; 0 = auto)"),

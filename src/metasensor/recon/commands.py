@@ -186,7 +186,7 @@ def register(app: typer.Typer) -> None:
         cfg = None
         if psf is not None:
             bank, cfg = read_psf_file(psf)
-        stored = read_config_from_views(views)
+        stored = read_config_from_views(views, strict=config is None and psf is None)
         if config is not None:
             cfg = SystemConfig.from_toml(config)
         if psf is not None and stored is not None and cfg.scan != stored.scan:

@@ -56,7 +56,7 @@ def register(app: typer.Typer) -> None:
             raise ValueError(f"--iterations must be >= 1, got {iterations}")
         if not 0.0 < threshold < 1.0:
             raise ValueError(f"--threshold must lie in (0, 1), got {threshold}")
-        stored = read_config_from_views(capture)
+        stored = read_config_from_views(capture, strict=config is None)
         cfg = SystemConfig.from_toml(config) if config is not None else stored
         if config is not None and stored is not None:
             check_against_stored(cfg, stored, config, capture)

@@ -11,7 +11,7 @@ Hand-written (no library registers views through a phase-space forward model). P
    fit with the gradients of a wavefront error (Noll 4-21, :mod:`metasensor.recon.wavefront`,
    the DAO wavefront sensor's model), since a bank that is off is a wavefront that is off; a round
    whose fit explains less than MIN_EXPLAINED of the shifts' variance is not a wavefront error
-   and ends the registration;
+   and ends the registration (with fewer than MIN_FIT_VIEWS views the shifts go unfitted);
 4. H_uv ← the round-0 H_uv translated by the accumulated s_uv (Fourier shift, energy kept),
    accepted only if the Richardson–Lucy fit with it leaves a smaller misfit ||y − A I||.
 
@@ -65,7 +65,7 @@ from metasensor.recon.isa import richardson_lucy
 from metasensor.recon.shifts import fourier_shift, measure_shifts_torch
 
 __all__ = ["translate_psfs", "register_views", "Registration", "DEFAULT_ROUNDS",
-           "WAVEFRONT_MODES", "MIN_EXPLAINED"]
+           "WAVEFRONT_MODES", "MIN_EXPLAINED", "MIN_FIT_VIEWS"]
 
 DEFAULT_ROUNDS = 3  # measured: 0.43 -> 0.067 -> 0.004 px (0.05 λ error); 1.73 -> 0.037 -> 0.002
 DEFAULT_TOL_PX = 0.02  # a round below this r.m.s. shift ends the registration
@@ -79,6 +79,7 @@ DEFAULT_TOL_PX = 0.02  # a round below this r.m.s. shift ends the registration
 # than MIN_EXPLAINED ends the registration with the bank as it is.
 WAVEFRONT_MODES = tuple(range(4, 22))
 MIN_EXPLAINED = 0.7
+MIN_FIT_VIEWS = 30  # 2 x 30 shift components for 18 modes + 2 common: fewer, no fit
 
 
 @dataclass
@@ -165,8 +166,10 @@ def register_views(psf, data_win, d: int, device=None, rounds: int = DEFAULT_ROU
 
         if len(uv) != psf0.shape[0]:
             raise ValueError(f"uv lists {len(uv)} views, the bank holds {psf0.shape[0]}")
-        matrix = gradient_matrix(cfg, jmax=max(WAVEFRONT_MODES))
-    zsum = np.zeros(max(WAVEFRONT_MODES)) if cfg is not None else None
+        # the fit needs views to spare: with fewer than MIN_FIT_VIEWS the shifts go unfitted
+        if len(uv) >= MIN_FIT_VIEWS:
+            matrix = gradient_matrix(cfg, jmax=max(WAVEFRONT_MODES))
+    zsum = np.zeros(max(WAVEFRONT_MODES)) if matrix is not None else None
     explained: list[float] = []
     if max_shift_px is None:
         max_shift_px = min(50.0, min(y_win.shape[-2:]) * d / 3.0)

@@ -182,7 +182,12 @@ def realign_cmd(
             elif dtype == "float32" and views.dtype != np.float32:
                 views = views.astype(np.float32)  # exact for raw data up to 24 bits
             path = out if n_out == 1 else out.with_name(f"{out.stem}_{k:05d}{out.suffix}")
-            write_views(path, views, cfg, extra={**meta, "window": k})
+            # the phases in the order this stack's frames were taken (what motion correction
+            # needs): window k starts at frame k (sliding) or k·T, i.e. at phase index
+            # (start + k) % T or start % T of the scan order
+            s = (start_phase + (k if sliding else 0)) % tp
+            taken = [list(q) for q in phases[s:] + phases[:s]]
+            write_views(path, views, cfg, extra={**meta, "window": k, "scan_order": taken})
             written.append(path)
     typer.echo(f"-> {written[0]}" + (f" ... {written[-1]} ({len(written)} stacks)"
                                      if len(written) > 1 else ""))
@@ -191,16 +196,21 @@ def realign_cmd(
 def _stored_settings(raw_path: Path, config, scan, order, moving):
     """(config, scan order, moving) for ``realign``: the options given, else what ``simulate``
     (or another writer of this package) stored in the raw frames' description, else defaults."""
-    from metasensor.io.views import read_config_from_views, stored_extras
+    from metasensor.io.views import check_against_stored, read_config_from_views, stored_extras
     from metasensor.sensor.scan import check_scan_order
 
-    stored_cfg = read_config_from_views(raw_path) if config is None and raw_path.is_file() \
+    stored = read_config_from_views(raw_path, strict=config is None) if raw_path.is_file() \
         else None
-    cfg = stored_cfg.replace(scan=scan) if stored_cfg is not None and scan is not None \
-        else (stored_cfg or _config(config, scan))
+    if config is None and stored is not None:
+        cfg = stored.replace(scan=scan) if scan is not None else stored
+    else:
+        cfg = _config(config, scan)
+    if stored is not None and (config is not None or scan is not None):
+        # frames taken with one scan cannot be realigned as another
+        check_against_stored(cfg, stored, config if config is not None else "--scan", raw_path)
     extra = stored_extras(raw_path) if raw_path.is_file() else {}
     used = []
-    if stored_cfg is not None:
+    if config is None and stored is not None:
         used.append("configuration")
     phases = None
     if order is None and isinstance(extra.get("scan_order"), list):

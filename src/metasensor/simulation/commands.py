@@ -112,7 +112,8 @@ def register(app: typer.Typer) -> None:
         size: int = typer.Option(512, help="scene size in pixels (square)"),
         config: Path = typer.Option(None, help="system configuration TOML (default: prototype)"),
         rms: float = typer.Option(0.0, help="random aberration, waves r.m.s. (Noll 4-45)"),
-        zernike: str = typer.Option("", help="explicit Noll coefficients, e.g. '4:0.5,7:-0.2'"),
+        zernike: str = typer.Option("", help="explicit Noll coefficients, e.g. '4:0.5,7:-0.2', "
+                                    "or a .npy Noll vector"),
         lens: bool = typer.Option(False, help="field-dependent single-lens (f=135 mm f/10)"),
         scan: int = typer.Option(None, help="scan period (default: the config's)"),
         order: str = typer.Option("row-major", help="scan order: row-major or serpentine"),
