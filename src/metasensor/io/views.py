@@ -121,22 +121,11 @@ def read_views(path: str | Path, nnum: int | None = None, mmap: bool = False) ->
     return pages.reshape(nnum, nnum, *pages.shape[1:])
 
 
-def read_config_from_views(path: str | Path, strict: bool = True) -> SystemConfig | None:
-    """The SystemConfig stored in a view stack's metadata, or ``None``. ``strict=False``: a
-    stored configuration that cannot be read (an older version's field, a foreign description)
-    is named on stderr and counts as none (for callers given a configuration of their own)."""
-    if not strict:
-        try:
-            return read_config_from_views(path)
-        except ValueError as exc:  # ConfigError is a ValueError
-            import sys
-
-            print(f"note: ignoring the configuration stored in {Path(path).name}: {exc}",
-                  file=sys.stderr)
-            return None
+def _stored_meta(path: Path) -> dict | None:
+    """The JSON dict of a TIFF's description or a Zarr's attributes; ``None`` if it holds none
+    (ValueError for a file that is not a readable TIFF)."""
     import tifffile
 
-    path = Path(path)
     if path.suffix.lower() == ".zarr":
         import zarr
 
@@ -151,7 +140,25 @@ def read_config_from_views(path: str | Path, strict: bool = True) -> SystemConfi
             meta = json.loads(desc)
         except json.JSONDecodeError:
             return None
-    if not isinstance(meta, dict):
+    return meta if isinstance(meta, dict) else None
+
+
+def read_config_from_views(path: str | Path, strict: bool = True) -> SystemConfig | None:
+    """The SystemConfig stored in a view stack's metadata, or ``None``. ``strict=False``: a
+    stored configuration that cannot be read (an older version's field, a foreign description)
+    is named on stderr and counts as none (for callers given a configuration of their own)."""
+    if not strict:
+        try:
+            return read_config_from_views(path)
+        except ValueError as exc:  # ConfigError is a ValueError
+            import sys
+
+            print(f"note: ignoring the configuration stored in {Path(path).name}: {exc}",
+                  file=sys.stderr)
+            return None
+    path = Path(path)
+    meta = _stored_meta(path)
+    if meta is None:
         return None
     fields = set(SystemConfig.__dataclass_fields__)
     top = {k: v for k, v in meta.items() if k in fields}
@@ -166,21 +173,12 @@ def read_config_from_views(path: str | Path, strict: bool = True) -> SystemConfi
 
 def stored_extras(path: str | Path) -> dict:
     """What a TIFF or Zarr written by this package keeps under ``"metasensor"`` in its
-    description (e.g. ``scan_order``, ``moving``), or ``{}`` (none, or not JSON)."""
-    import tifffile
-
-    path = Path(path)
+    description (e.g. ``scan_order``, ``moving``), or ``{}`` (none, or not readable)."""
     try:
-        if path.suffix.lower() == ".zarr":
-            import zarr
-
-            meta = dict(zarr.open_array(str(path), mode="r").attrs)
-        else:
-            with tifffile.TiffFile(path) as tif:
-                meta = json.loads(tif.pages[0].description)
-    except Exception:  # unreadable or no JSON: the caller's defaults apply
+        meta = _stored_meta(Path(path))
+    except Exception:  # unreadable: the caller's defaults apply
         return {}
-    extra = meta.get("metasensor") if isinstance(meta, dict) else None
+    extra = meta.get("metasensor") if meta is not None else None
     return extra if isinstance(extra, dict) else {}
 
 
