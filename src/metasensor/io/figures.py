@@ -37,12 +37,14 @@ def new_figure(nrows: int = 1, ncols: int = 1, *, size: tuple[float, float] | No
     return plt.subplots(nrows, ncols, figsize=size, squeeze=False)
 
 
-def save_figure(fig, path: str | Path, *, dpi: int = 110) -> Path:
-    """Write ``fig`` to ``path`` (PNG) atomically and close it."""
+def save_figure(fig, path: str | Path, *, dpi: int = 110, tight: bool = True) -> Path:
+    """Write ``fig`` to ``path`` (PNG) atomically and close it (``tight``: tight_layout first;
+    off for figures laid out by hand, e.g. a colorbar shared by an axes grid)."""
     plt = _plt()
     path = Path(path)
     try:
-        fig.tight_layout()
+        if tight:
+            fig.tight_layout()
         with atomic_path(path) as tmp:
             fig.savefig(tmp, format="png", dpi=dpi)
     finally:

@@ -93,9 +93,13 @@ def register(app: typer.Typer) -> None:
         p = period or (cfg.scan if cfg is not None else 0)
         stored = stored_extras(views) if Path(views).exists() else {}
         if scan_order is None and isinstance(stored.get("scan_order"), list):
-            scan_order = repr([tuple(q) for q in stored["scan_order"]])
+            from metasensor.sensor.scan import check_scan_order, period_of
+
+            order = [tuple(q) for q in stored["scan_order"]]
+            order = check_scan_order(order, p or period_of(order))
             typer.echo(f"using the scan order stored in {Path(views).name}", err=True)
-        order = parse_scan_order(scan_order or "row-major", p)
+        else:
+            order = parse_scan_order(scan_order or "row-major", p)
         if flow_view in ("centre", "center"):
             fv = None
         elif flow_view == "sharpest":

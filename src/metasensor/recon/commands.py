@@ -13,26 +13,17 @@ import typer
 __all__ = ["register", "read_psf_file", "write_outputs"]
 
 
-def read_psf_file(path: Path):
+def read_psf_file(path: Path, with_attrs: bool = False):
     """PSF bank (nnum, nnum, K, K) and its SystemConfig from a ``metasensor psf`` HDF5 file
-    (:func:`metasensor.optics.psf_io.load_psf`); refuses banks sampled finer than the pixels."""
+    (:func:`metasensor.optics.psf_io.load_psf`), plus its attributes if ``with_attrs``; refuses
+    banks sampled finer than the pixels."""
     from metasensor.optics.psf_io import load_psf
 
     bank, cfg, attrs = load_psf(path, with_attrs=True)
     if int(np.ravel(attrs.get("subsample", 1))[0]) != 1:
         raise ValueError(f"{path}: PSF bank sampled at pixel_pitch/{attrs['subsample']}; "
                          "reconstruction needs subsample 1")
-    return bank, cfg
-
-
-def _bank_zernike(path: Path) -> np.ndarray | None:
-    """The Noll vector a ``metasensor psf`` bank was made with (its ``zernike`` attribute)."""
-    import h5py
-
-    with h5py.File(path, "r") as f:  # attributes only (read_psf_file checked the file)
-        attrs = dict(f["psf"].attrs) | dict(f.attrs)
-    z = np.asarray(attrs.get("zernike", np.zeros(0)), dtype=np.float64).ravel()
-    return z if z.size and np.isfinite(z).all() else None
+    return (bank, cfg, attrs) if with_attrs else (bank, cfg)
 
 
 def write_outputs(out: Path, rec, views) -> list[Path]:
@@ -185,7 +176,7 @@ def register(app: typer.Typer) -> None:
         bank = None
         cfg = None
         if psf is not None:
-            bank, cfg = read_psf_file(psf)
+            bank, cfg, psf_attrs = read_psf_file(psf, with_attrs=True)
         stored = read_config_from_views(views, strict=config is None and psf is None)
         if config is not None:
             cfg = SystemConfig.from_toml(config)
@@ -250,8 +241,8 @@ def register(app: typer.Typer) -> None:
             shutil.rmtree(out / "image.zarr")
             typer.echo(f"removed {out / 'image.zarr'} of an earlier run", err=True)
         if psf is not None:  # record the aberration the given bank was made with, if stored
-            z = _bank_zernike(psf)
-            if z is not None:
+            z = np.asarray(psf_attrs.get("zernike", ()), dtype=np.float64).ravel()
+            if z.size and np.isfinite(z).all():
                 rec.zernike = np.zeros(rec.zernike.shape[:2] + (z.size,), np.float32) + z
         written = write_outputs(out, rec, stack)
         if rec.registration_zernike is not None:

@@ -67,7 +67,7 @@ from metasensor.recon.shifts import fourier_shift, measure_shifts_torch
 __all__ = ["translate_psfs", "register_views", "Registration", "DEFAULT_ROUNDS",
            "WAVEFRONT_MODES", "MIN_EXPLAINED", "MIN_FIT_VIEWS"]
 
-DEFAULT_ROUNDS = 3  # measured: 0.43 -> 0.067 -> 0.004 px (0.05 λ error); 1.73 -> 0.037 -> 0.002
+DEFAULT_ROUNDS = 3  # measured: 0.43 -> 0.069 -> 0.019 px (0.05 λ error); 1.75 -> 0.036 -> 0.017
 DEFAULT_TOL_PX = 0.02  # a round below this r.m.s. shift ends the registration
 # With the system (cfg, uv) the measured shifts are fitted by the gradients of a wavefront error
 # (Noll modes 4-21, :mod:`metasensor.recon.wavefront`) and the fit is applied: a bank error is a
@@ -75,7 +75,7 @@ DEFAULT_TOL_PX = 0.02  # a round below this r.m.s. shift ends the registration
 # explains, measured on the first round: defocus errors of 0.05 / 0.1 / 0.2 λ (192 px, chart and
 # camera, 30 dB) 0.99-1.00, recovering 0.048 / 0.095 / 0.195 λ; the noise of a right bank
 # 0.09-0.17 (below tol_px anyway); the 4 x 4 multisite blocks (true banks, up to 1.8 λ) 0.77-0.98,
-# and 0.31-0.41 on the three whose measurement failed (12-24 px r.m.s.). A round explaining less
+# and 0.44-0.59 on the three whose measurement failed (12-24 px r.m.s.). A round explaining less
 # than MIN_EXPLAINED ends the registration with the bank as it is.
 WAVEFRONT_MODES = tuple(range(4, 22))
 MIN_EXPLAINED = 0.7
@@ -123,7 +123,7 @@ def translate_psfs(psf: torch.Tensor, shifts: torch.Tensor) -> torch.Tensor:
 def _wavefront_fit(step: torch.Tensor, cfg, uv, matrix) -> tuple[torch.Tensor, np.ndarray, float]:
     """The shifts ``step (V, 2)`` of views ``uv`` fitted by wavefront-error gradients: (fitted
     shifts (V, 2), Noll vector (waves), fraction of the shifts' variance explained)."""
-    from metasensor.recon.wavefront import fit_shifts
+    from metasensor.recon.wavefront import fit_shifts, predicted_shifts
 
     n = cfg.nnum
     grid = np.full((n, n, 2), np.nan)
@@ -132,10 +132,9 @@ def _wavefront_fit(step: torch.Tensor, cfg, uv, matrix) -> tuple[torch.Tensor, n
         grid[u, v] = step[k].numpy()
         used[u, v] = True
     fit = fit_shifts(grid, cfg, mask=used, modes=WAVEFRONT_MODES, reject=0, matrix=matrix,
-                     jmax=max(WAVEFRONT_MODES),
-                     min_footprint=0.0)
-    g = matrix[0]
-    smooth = np.stack([g[u, v, :, :fit.zernike.size] @ fit.zernike for u, v in uv])
+                     jmax=max(WAVEFRONT_MODES), min_footprint=0.0)
+    rows, cols = (list(a) for a in zip(*uv, strict=True))
+    smooth = predicted_shifts(fit.zernike, cfg, matrix=matrix)[rows, cols]
     total = float((step - step.mean(dim=0)).pow(2).sum(dim=1).mean())
     explained = 1.0 - fit.residual_rms**2 / total if total > 0 else 0.0
     return torch.from_numpy(smooth), fit.zernike, explained
@@ -175,6 +174,10 @@ def register_views(psf, data_win, d: int, device=None, rounds: int = DEFAULT_ROU
         max_shift_px = min(50.0, min(y_win.shape[-2:]) * d / 3.0)
     light = psf0.sum(dim=(-2, -1)).to(torch.float64).cpu()
 
+    def centred(s):  # a shift common to all views is the image's position, which the views
+        # cannot tell from the bank's: keep the bank's (an offset of 0.78 px crept in without)
+        return s - (light[:, None] * s).sum(dim=0) / light.sum()
+
     def fit(bank):  # operator, its predictions of the RL estimate, data, weights, rel. misfit
         geometry = make_geometry(tuple(y_win.shape[-2:]), d, bank.shape[-1] // 2, pad=pad)
         op = PhaseSpaceOperator(bank, geometry, device=device)
@@ -194,10 +197,7 @@ def register_views(psf, data_win, d: int, device=None, rounds: int = DEFAULT_ROU
     misfits = [misfit]
     for _ in range(rounds):
         step = measure_shifts_torch(pred, data, weight=weight, max_shift=max_shift_px / d)
-        step = step.cpu() * d
-        # a shift common to all views is the image's position, which the views cannot tell from
-        # the bank's: keep the bank's (measured: an offset of 0.78 px crept in without this)
-        step = step - (light[:, None] * step).sum(dim=0) / light.sum()
+        step = centred(step.cpu() * d)
         rms = float(step.pow(2).sum(dim=1).mean().sqrt())
         history.append(rms)
         if rms < tol_px:  # registered: a step this small changes nothing worth a fit
@@ -205,7 +205,7 @@ def register_views(psf, data_win, d: int, device=None, rounds: int = DEFAULT_ROU
         z_step = None
         if matrix is not None:  # a bank error is a wavefront error: keep what is one
             step, z_step, frac = _wavefront_fit(step, cfg, uv, matrix)
-            step = step - (light[:, None] * step).sum(dim=0) / light.sum()
+            step = centred(step)
             explained.append(frac)
             if frac < MIN_EXPLAINED:
                 break

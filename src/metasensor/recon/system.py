@@ -252,15 +252,9 @@ def plot_wavefront_map(sa: SystemAberration, path: str | Path, truth=None) -> Pa
                 if i == 0 and j == 0:
                     ax.set_title(name, fontsize=8, loc="left")
     fig.colorbar(im, ax=axes, shrink=0.6, label="waves")
-    path = Path(path)
-    from metasensor.io.atomic import atomic_path
+    from metasensor.io.figures import save_figure
 
-    try:
-        with atomic_path(path) as tmp:
-            fig.savefig(tmp, format="png", dpi=110)
-    finally:
-        plt.close(fig)
-    return path
+    return save_figure(fig, path, tight=False)
 
 
 def plot_convergence(histories: dict[str, list[float]], path: str | Path,
@@ -279,13 +273,6 @@ def plot_convergence(histories: dict[str, list[float]], path: str | Path,
     ax.set_ylabel("r.m.s. of the phase update (λ)")
     ax.legend(fontsize=8)
     ax.grid(alpha=0.3)
-    fig.tight_layout()
-    path = Path(path)
-    from metasensor.io.atomic import atomic_path
+    from metasensor.io.figures import save_figure
 
-    try:
-        with atomic_path(path) as tmp:
-            fig.savefig(tmp, format="png", dpi=110)
-    finally:
-        plt.close(fig)
-    return path
+    return save_figure(fig, path)
