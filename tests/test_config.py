@@ -1,5 +1,6 @@
 """SystemConfig: defaults, derived quantities, validation (one error per bad parameter), TOML."""
 
+import json
 import math
 
 import pytest
@@ -78,6 +79,20 @@ def test_unknown_key_and_bad_toml(tmp_path):
         ms.SystemConfig.from_toml(bad)
     with pytest.raises(ConfigError, match="not found"):
         ms.SystemConfig.from_toml(tmp_path / "missing.toml")
+    # the view-stack extras key belongs to JSON descriptions only, not to a TOML system table
+    bad.write_text("[system]\nnnum = 15\nmetasensor = 1\n")
+    with pytest.raises(ConfigError, match="metasensor"):
+        ms.SystemConfig.from_toml(bad)
+
+
+def test_json_description_with_extras_and_bad_json():
+    cfg = ms.SystemConfig(scan=3)
+    desc = json.dumps({**cfg.to_dict(), "metasensor": {"scan_order": [[0, 0]]}})
+    assert ms.SystemConfig.from_json(desc) == cfg
+    with pytest.raises(ConfigError, match="invalid JSON"):
+        ms.SystemConfig.from_json("{nnum: 15")
+    with pytest.raises(ConfigError, match="must be an object"):
+        ms.SystemConfig.from_json("[15]")
 
 
 def test_optical_digest_ignores_non_optical_fields():

@@ -233,11 +233,10 @@ class SystemConfig:
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> SystemConfig:
         names = {f.name for f in dataclasses.fields(cls)}
-        # "metasensor": what a view stack's description adds to its configuration (io.views)
-        unknown = sorted(set(data) - names - {"metasensor"})
+        unknown = sorted(set(data) - names)
         if unknown:
             raise ConfigError(f"unknown system parameter(s): {', '.join(unknown)}")
-        data = {k: v for k, v in data.items() if k != "metasensor"}
+        data = dict(data)
         shape = data.get("sensor_shape")
         if isinstance(shape, (list, tuple)) and all(
             isinstance(s, (int, float)) and not isinstance(s, bool) and float(s).is_integer()
@@ -252,7 +251,15 @@ class SystemConfig:
 
     @classmethod
     def from_json(cls, text: str) -> SystemConfig:
-        return cls.from_dict(json.loads(text))
+        """Configuration from JSON: a config's own ``to_json`` or a view stack's description,
+        whose extras under the ``"metasensor"`` key (io.views) are not system parameters."""
+        try:
+            data = json.loads(text)
+        except json.JSONDecodeError as exc:
+            raise ConfigError(f"invalid JSON configuration: {exc}") from None
+        if not isinstance(data, dict):
+            raise ConfigError(f"JSON configuration must be an object, got {type(data).__name__}")
+        return cls.from_dict({k: v for k, v in data.items() if k != "metasensor"})
 
     def to_toml_string(self) -> str:
         lines = ["# metasensor system configuration (SI units: metres)", "[system]"]

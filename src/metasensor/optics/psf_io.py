@@ -7,12 +7,11 @@ SystemConfig as JSON), ``zernike`` (Noll vector, waves), ``depth`` [m], ``subsam
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
 
-from metasensor.config import SystemConfig
+from metasensor.config import ConfigError, SystemConfig
 from metasensor.io.atomic import atomic_path
 
 __all__ = ["save_psf", "load_psf", "plot_views", "parse_zernike"]
@@ -99,7 +98,7 @@ def load_psf(path: str | Path, with_attrs: bool = False):
             cfg = SystemConfig.from_json(str(attrs["config"]))
     except OSError as exc:
         raise ValueError(f"{path}: not a readable HDF5 file ({exc})") from None
-    except (KeyError, json.JSONDecodeError) as exc:
+    except (KeyError, ConfigError) as exc:
         raise ValueError(f"{path}: missing or corrupt config attribute ({exc})") from None
     if psf.shape[:2] != (cfg.nnum, cfg.nnum):
         raise ValueError(f"{path}: psf shape {psf.shape} does not match nnum {cfg.nnum}")

@@ -17,13 +17,12 @@ displacement the aberration gives view (u, v) relative to the centre view; × d 
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from metasensor.config import SystemConfig
+from metasensor.config import ConfigError, SystemConfig
 
 __all__ = ["SystemAberration", "calibrate_system", "plot_wavefront_map", "plot_convergence"]
 
@@ -115,7 +114,7 @@ class SystemAberration:
                           view_shape=tuple(int(s) for s in f.attrs["view_shape"]), config=cfg,
                           pupils=f["pupils"][()] if "pupils" in f else None,
                           residual_rms=f["residual_rms"][()] if "residual_rms" in f else None)
-            except (KeyError, json.JSONDecodeError) as exc:
+            except (KeyError, ConfigError) as exc:
                 raise ValueError(f"{path}: incomplete system calibration ({exc})") from None
         n = cfg.nnum
         if out.zernike.ndim != 3 or out.shift_grid.shape[:3] != (n, n, 2):
