@@ -111,6 +111,13 @@ class Calibration:
         t = math.radians(self.rotation)
         return self.scale * np.array([[math.cos(t), math.sin(t)], [-math.sin(t), math.cos(t)]])
 
+    @property
+    def origin(self) -> tuple[float, float]:
+        """(row, col) on the sensor of rectified pixel (0, 0): the first pixel of kept lenslet
+        (0, 0) at phase (0, 0), ``center - M (h, h)`` (where the views' grid starts)."""
+        h = (self.nnum - 1) / 2
+        return tuple(float(v) for v in np.asarray(self.center) - self.matrix @ np.array([h, h]))
+
     def nominal_rect(self, phase: tuple[int, int]) -> tuple[int, int]:
         """Nominal block displacement of ``phase`` in rectified pixels."""
         if self.moving == "image":

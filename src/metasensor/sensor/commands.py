@@ -171,8 +171,11 @@ def realign_cmd(
         if apply_flat:
             flat = _flat(calib, calib_path, cfg)
         n_out = n_frames - tp + 1 if sliding else n_frames // tp
+        # where the views' grid starts on the raw frames: sensor (row, col) of the first pixel
+        # of view lenslet (0, 0) at phase (0, 0) (the calibration's kept grid, else pixel 0)
+        origin = [0.0, 0.0] if calib is None else [round(v, 4) for v in calib.origin]
         meta = {"scan_order": [list(p) for p in phases], "moving": moving,
-                "source": str(raw_path), "sliding": sliding}
+                "source": str(raw_path), "sliding": sliding, "origin": origin}
         written = []
         for k, views in enumerate(realign_sequence(stream, cfg, phases, moving,
                                                    sliding=sliding, start_phase=start_phase)):
