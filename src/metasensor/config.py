@@ -63,7 +63,7 @@ class SystemConfig:
     focal_length, focus_distance : main-lens focal length and object focus distance [m]
         (optional; needed only for metric depth).
     sensor_shape : (rows, columns) of the full sensor.
-    bit_depth : ADC bits of the raw frames (12 or 16).
+    bit_depth : ADC bits of the raw frames (8, 10, 12, 14 or 16).
     """
 
     nnum: int = 15
@@ -233,10 +233,11 @@ class SystemConfig:
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> SystemConfig:
         names = {f.name for f in dataclasses.fields(cls)}
-        unknown = sorted(set(data) - names)
+        # "metasensor": the extras a view stack's description or Zarr attributes add (io.views)
+        unknown = sorted(set(data) - names - {"metasensor"})
         if unknown:
             raise ConfigError(f"unknown system parameter(s): {', '.join(unknown)}")
-        data = dict(data)
+        data = {k: v for k, v in data.items() if k != "metasensor"}
         shape = data.get("sensor_shape")
         if isinstance(shape, (list, tuple)) and all(
             isinstance(s, (int, float)) and not isinstance(s, bool) and float(s).is_integer()
@@ -259,7 +260,7 @@ class SystemConfig:
             raise ConfigError(f"invalid JSON configuration: {exc}") from None
         if not isinstance(data, dict):
             raise ConfigError(f"JSON configuration must be an object, got {type(data).__name__}")
-        return cls.from_dict({k: v for k, v in data.items() if k != "metasensor"})
+        return cls.from_dict(data)
 
     def to_toml_string(self) -> str:
         lines = ["# metasensor system configuration (SI units: metres)", "[system]"]
@@ -275,7 +276,12 @@ class SystemConfig:
             data = tomllib.loads(text)
         except tomllib.TOMLDecodeError as exc:
             raise ConfigError(f"invalid TOML: {exc}") from None
-        return cls.from_dict(data.get("system", data))
+        table = data.get("system", data)
+        if not isinstance(table, dict):
+            raise ConfigError(f"'system' must be a TOML table, got {table!r:.40}")
+        if "metasensor" in table:  # the extras key belongs to JSON descriptions only
+            raise ConfigError("unknown system parameter(s): metasensor")
+        return cls.from_dict(table)
 
     def to_toml(self, path: str | Path) -> Path:
         """Write the configuration as TOML (atomically); returns the path."""

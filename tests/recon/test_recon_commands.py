@@ -216,3 +216,16 @@ def test_config_that_resamples_the_stored_views_is_refused(files, tmp_path):
                                    str(tmp_path / "na.toml"), "--iterations", "1", "--out",
                                    str(tmp_path / "r2")])
     assert res.exit_code == 0, res.output
+
+
+def test_psf_bank_of_another_nnum_is_named(files, tmp_path):
+    # a bank made for nnum 3 against nnum-5 views: used to read "scan period 5 does not divide
+    # nnum 3"
+    bank_file = tmp_path / "psf3.h5"
+    with h5py.File(bank_file, "w") as f:
+        f.create_dataset("psf", data=gaussian_psfs(nnum=3, radius=2))
+        f.attrs["config"] = SystemConfig(nnum=3, scan=3).to_json()
+    res = CliRunner().invoke(app, ["reconstruct", str(files / "views.tif"), "--psf",
+                                   str(bank_file), "--out", str(tmp_path / "r")])
+    assert res.exit_code != 0
+    assert "made for nnum 3" in str(res.exception) and "nnum 5" in str(res.exception)

@@ -80,3 +80,21 @@ def test_realign_with_calibration_keeps_the_views_and_stores_their_origin(tmp_pa
     res = run(app, ["realign", str(tmp_path / "raw.tif"), "--out", str(tmp_path / "w.tif")])
     assert res.exit_code == 0, res.output
     assert stored_extras(tmp_path / "w.tif")["origin"] == [0.0, 0.0]
+
+
+def test_realign_with_calibration_names_the_bad_frame(tmp_path):
+    # frame 3 holds the NaN: measuring offsets per frame used to call it "frame 0"
+    run = CliRunner().invoke
+    desc = json.dumps(description(CFG, kind="frames", scan_order=[list(p) for p in ORDER],
+                                  moving="mla"))
+    white = ms.unrealign(pupil_views(), CFG, ORDER)
+    write_raw(tmp_path / "white.tif", white, description=desc)
+    raw = white.astype(np.float32)
+    raw[3, 50, 50] = np.nan
+    write_raw(tmp_path / "raw.tif", raw, description=desc)
+    res = run(app, ["calibrate", str(tmp_path / "white.tif"), "--out", str(tmp_path / "c.toml"),
+                    "--no-flat"])
+    assert res.exit_code == 0, res.output
+    res = run(app, ["realign", str(tmp_path / "raw.tif"), "--calib", str(tmp_path / "c.toml"),
+                    "--out", str(tmp_path / "v.tif")])
+    assert res.exit_code != 0 and "frame 3" in str(res.exception)

@@ -19,6 +19,10 @@ def _parse_range(text: str | None) -> tuple[float, float] | None:
     return lo, hi
 
 
+OUTPUT_FILES = (("disparity", "tif"), ("confidence", "tif"), ("image_depth", "tif"),
+                ("object_distance", "tif"), ("depth", "png"), ("depth", "json"))
+
+
 def run_depth(views: Path, out: Path, system: Path | None = None, config: Path | None = None,
               candidates: int = 64, disparity_range: str | None = None, occlusion: bool = True,
               radius: int = 4, device: str | None = None, progress: bool = True) -> dict:
@@ -31,12 +35,14 @@ def run_depth(views: Path, out: Path, system: Path | None = None, config: Path |
     from metasensor.config import SystemConfig
     from metasensor.depth.estimate import estimate_depth
     from metasensor.depth.figure import depth_figure
-    from metasensor.io.atomic import atomic_path, atomic_write_text
+    from metasensor.io.atomic import atomic_path, atomic_write_text, refuse_overwrite
     from metasensor.io.views import check_against_stored, read_config_from_views, read_views
 
     views = Path(views)
     if not views.exists():
         raise FileNotFoundError(f"view stack not found: {views}")
+    out = Path(out)
+    refuse_overwrite([out / f"{n}.{ext}" for n, ext in OUTPUT_FILES], [views, system, config])
     if config is not None:
         cfg = SystemConfig.from_toml(config)
         stored = read_config_from_views(views, strict=False)
@@ -52,7 +58,6 @@ def run_depth(views: Path, out: Path, system: Path | None = None, config: Path |
     res = estimate_depth(stack, cfg, calibration=system, candidates=candidates,
                          disparity_range=_parse_range(disparity_range), occlusion=occlusion,
                          radius=radius, device=device, progress=progress)
-    out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     maps = {"disparity": res.disparity, "confidence": res.confidence,
             "image_depth": res.image_depth}

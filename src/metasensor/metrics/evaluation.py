@@ -43,6 +43,8 @@ def evaluate_full(image, truth=None, chart: bool = False, rois=None, *,
         raise ValueError("image contains NaN or infinite values")
     if truth is None and not chart and not rois:
         raise ValueError("nothing to evaluate: give a truth image, chart=True or rois")
+    if pixel_pitch is not None and not (pixel_pitch > 0 and np.isfinite(pixel_pitch)):
+        raise ValueError(f"pixel_pitch must be a positive length in metres, got {pixel_pitch!r}")
     out: dict = {"shape": list(a.shape), "pixel_pitch": pixel_pitch}
     if truth is not None:
         t = np.asarray(truth)

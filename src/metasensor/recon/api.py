@@ -226,6 +226,8 @@ def _check_views(views, cfg: SystemConfig):
         raise TypeError(f"views must be an integer or float array, got dtype {dtype}")
     if isinstance(views, np.ndarray) and dtype.kind == "f" and not np.isfinite(views).all():
         raise ValueError("views contain NaN or infinite values")
+    if isinstance(views, np.ndarray) and views.size and not views.max() > 0:
+        raise ValueError("views hold no light (no sample above 0): nothing to reconstruct")
     return views
 
 

@@ -45,7 +45,9 @@ def write_outputs(out: Path, rec, views) -> list[Path]:
     with atomic_path(out / "zernike.npy") as tmp:
         np.save(tmp, rec.zernike)
     summary = {"method": rec.method, "blocks": [len(rec.history), len(rec.history[0])],
-               "solver": rec.solver, "iterations": rec.iterations, "subsets": rec.subsets,
+               "solver": rec.solver,  # Richardson-Lucy's parameters; HQS uses neither
+               "iterations": rec.iterations if rec.solver == "rl" else None,
+               "subsets": rec.subsets if rec.solver == "rl" else None,
                "seconds": rec.seconds,
                "shape": list(image.shape), "history": rec.history,
                "registration_px": rec.registration,
@@ -180,6 +182,9 @@ def register(app: typer.Typer) -> None:
         stored = read_config_from_views(views, strict=config is None and psf is None)
         if config is not None:
             cfg = SystemConfig.from_toml(config)
+        if psf is not None and stored is not None and cfg.nnum != stored.nnum:
+            raise ValueError(f"{psf}: PSF bank made for nnum {cfg.nnum}, but {views} has nnum "
+                             f"{stored.nnum}")
         if psf is not None and stored is not None and cfg.scan != stored.scan:
             cfg = cfg.replace(scan=stored.scan)  # a bank does not depend on the scan
         if cfg is not None and stored is not None:
@@ -245,6 +250,8 @@ def register(app: typer.Typer) -> None:
             if z.size and np.isfinite(z).all():
                 rec.zernike = np.zeros(rec.zernike.shape[:2] + (z.size,), np.float32) + z
         written = write_outputs(out, rec, stack)
+        if target is not None:
+            written.insert(1, out / "image.zarr")
         if rec.registration_zernike is not None:
             applied = np.any(rec.registration_zernike != 0, axis=-1)
             worst = float(np.abs(rec.registration_zernike).max())

@@ -33,7 +33,8 @@ def register(app: typer.Typer) -> None:
         blocks: str = typer.Option("4x4", help="blocks whose centres get a wavefront, e.g. 4x4"),
         grid: str = typer.Option("15x20", help="registration control points (rows x cols)"),
         iterations: int = typer.Option(200, help="Adam steps per pyramid level"),
-        threshold: float = typer.Option(0.5, help="pupil binarisation threshold (0.5-0.8)"),
+        threshold: float = typer.Option(0.5, help="pupil binarisation threshold in (0, 1) "
+                                        "(the paper: 0.5-0.8 all work)"),
         figure: bool = typer.Option(True, help="also write <out>.png (wavefront map)"),
     ) -> None:
         """Global system-aberration calibration from a textured capture (e.g. a checkerboard).

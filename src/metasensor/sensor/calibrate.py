@@ -338,13 +338,18 @@ def grid_of(calib: Calibration) -> dict:
             "point": np.asarray(calib.center, float), "contrast": calib.contrast}
 
 
-def frame_offset(frame, calib: Calibration, phase: tuple[int, int]) -> tuple[float, float]:
+def frame_offset(frame, calib: Calibration, phase: tuple[int, int],
+                 index: int | None = None) -> tuple[float, float]:
     """Measured grid displacement [sensor px] of one raw frame of ``phase`` (vs the
-    calibration's phase (0, 0)), the lattice translate nearest the calibration's value."""
+    calibration's phase (0, 0)), the lattice translate nearest the calibration's value.
+    ``index``: the frame's number in its file, for error messages."""
     k = calib.scan_order.index(tuple(phase)) if tuple(phase) in calib.scan_order else None
     if k is None:
         raise ValueError(f"phase {tuple(phase)} is not in the calibration's scan order")
     expect = (calib.offsets or calib.nominal_offsets)[k]
+    arr = np.asarray(frame)
+    if index is not None and arr.dtype.kind == "f" and not np.isfinite(arr).all():
+        raise ValueError(f"frame {index} contains NaN or infinite values")
     off = measure_offsets([frame], grid_of(calib), [expect])[0]
     return float(off[0]), float(off[1])
 

@@ -57,7 +57,8 @@ def calibrate_cmd(
     cfg = _config(config, scan)
     from metasensor.io.atomic import refuse_overwrite
 
-    refuse_overwrite([out], [white, config])
+    flat_path = out.parent / out.with_suffix(".flat.tif").name if flat else None
+    refuse_overwrite([out, figure, flat_path], [white, config])
     with open_raw(white) as raw:
         pages = len(raw)
         period = cfg.scan if scan is not None else (int(round(pages**0.5)) if pages > 1 else 1)
@@ -162,7 +163,7 @@ def realign_cmd(
                 from metasensor.sensor.calibrate import frame_offset
 
                 def off(f, frame, phase):
-                    return frame_offset(frame, calib, phase)
+                    return frame_offset(frame, calib, phase, index=f)
             elif offsets == "measure":
                 off = "nominal"
             stream = rectify_frames(stream, calib, phases, offsets=off,

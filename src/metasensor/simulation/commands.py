@@ -120,7 +120,7 @@ def register(app: typer.Typer) -> None:
         snr: float = typer.Option(None, help="target SNR of the views in dB (default: no noise)"),
         photons: float = typer.Option(None, help="photo-electrons at full scale (or --snr)"),
         read_noise: float = typer.Option(2.0, help="read noise, electrons r.m.s."),
-        bits: int = typer.Option(None, help="ADC bits (12 or 16; default: the config's)"),
+        bits: int = typer.Option(None, help="ADC bits (8, 10, 12, 14 or 16; default: config)"),
         seed: int = typer.Option(0, help="random seed (aberration and noise)"),
         clean: bool = typer.Option(False, help="also write the noise-free views"),
         device: str = typer.Option(None, help="torch device (default: CUDA if present)"),
@@ -133,10 +133,14 @@ def register(app: typer.Typer) -> None:
         import numpy as np
 
         from metasensor.config import SystemConfig
+        from metasensor.io.atomic import refuse_overwrite
         from metasensor.simulation.capture import simulate
         from metasensor.simulation.lens import SingleLens
         from metasensor.simulation.scenes import load_scene
 
+        # the capture files written (or removed as stale) must not be what this run reads
+        refuse_overwrite([out / name for name in CAPTURE_FILES],
+                         [Path(scene), config, Path(zernike) if zernike.endswith(".npy") else None])
         cfg = SystemConfig.from_toml(config) if config is not None else SystemConfig()
         if size < 8:
             raise ValueError(f"--size must be at least 8, got {size}")

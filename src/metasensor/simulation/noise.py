@@ -123,4 +123,12 @@ def add_noise(clean: np.ndarray, snr_db: float | None, photons: float | None,
         # noise power ~ gain (Poisson-dominated): correct the gain by the dB error
         model = NoiseModel(model.gain * 10.0 ** ((got - snr_db) / 10.0), read_noise, bit_depth)
         noisy = apply_noise(clean, model, np.random.default_rng(seed))
+    else:
+        got = measure_snr(clean, noisy)
+        if abs(got - snr_db) > SNR_TOLERANCE_DB:
+            raise ValueError(f"snr_db {snr_db:g} cannot be reached: clipping at 0 and full scale "
+                             f"leaves {got:.2f} dB (a lower SNR needs a signed detector model)")
     return noisy, model
+
+
+SNR_TOLERANCE_DB = 0.5  # a realised SNR further than this from the target is refused
