@@ -2,6 +2,8 @@
 
 Each module defines ``run(quick: bool = False) -> list[dict]``; every dict is one row.
 Usage: ``python benchmarks/run_all.py [--quick] [NAME ...]`` (names without ``bench_``).
+A full run writes ``results/<name>.json``; a ``--quick`` run writes ``results/<name>_quick.json``
+(so a smoke run never replaces the committed full-run rows). An unknown NAME is an error.
 """
 
 from __future__ import annotations
@@ -50,6 +52,11 @@ def machine() -> dict:
     }
 
 
+def result_name(name: str, quick: bool) -> str:
+    """The JSON file a run of benchmark ``name`` writes: quick rows never replace full ones."""
+    return f"{name}_quick.json" if quick else f"{name}.json"
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("names", nargs="*", help="benchmarks to run (default: all)")
@@ -57,6 +64,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", default=str(HERE / "results"), help="folder for the JSON files")
     args = parser.parse_args(argv)
     files = sorted(HERE.glob("bench_*.py"))
+    known = [f.stem.removeprefix("bench_") for f in files]
+    unknown = [n for n in dict.fromkeys(args.names) if n not in known]
+    if unknown:
+        print(f"run_all.py: unknown benchmark{'s' if len(unknown) > 1 else ''} "
+              f"{', '.join(unknown)}; valid names: {', '.join(known)}", file=sys.stderr)
+        return 2
     if args.names:
         files = [f for f in files if f.stem.removeprefix("bench_") in args.names]
     failed = 0
@@ -76,7 +89,7 @@ def main(argv: list[str] | None = None) -> int:
         print(_table(rows))
         payload = {"benchmark": name, "quick": args.quick, "machine": machine(),
                    "seconds_total": time.perf_counter() - t0, "rows": rows}
-        out = Path(args.out) / f"{name}.json"
+        out = Path(args.out) / result_name(name, args.quick)
         atomic_write_text(out, json.dumps(payload, indent=2, default=float))
         print(f"-> {out}")
     return 1 if failed else 0

@@ -94,7 +94,11 @@ def test_cli_bad_input_one_line(tmp_path):
             "if len(app.registered_commands) == 1: app.callback()(lambda: None)\n"
             "main()")
     tifffile.imwrite(tmp_path / "r.tif", np.zeros((8, 8), np.float32))
+    whole = tmp_path / "whole.tif"
+    tifffile.imwrite(whole, np.ones((64, 64), np.float32))
+    (tmp_path / "cut.tif").write_bytes(whole.read_bytes()[:9000])  # a truncated result
     for args, msg in [(["missing.tif", "--truth", "x.tif", "--out", "o"], "not found"),
+                      (["cut.tif", "--chart", "--out", "o"], "truncated or corrupt TIFF"),
                       ([str(tmp_path / "r.tif"), "--roi", "1,2,3", "--out", "o"], "--roi"),
                       ([str(tmp_path / "r.tif"), "--out", "o"], "nothing to evaluate")]:
         p = subprocess.run([sys.executable, "-c", code, "evaluate", *args], capture_output=True,

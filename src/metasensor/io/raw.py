@@ -1,42 +1,21 @@
 """Raw frame streams: multi-page TIFF read one frame at a time (never the whole sequence).
 
 Uncompressed contiguous files are memory-mapped (read-only); others are decoded page by page
-with tifffile. A truncated file (a page whose data run past the end of the file) is reported at
-open time as one clear line. The file is opened read-only and never modified.
+with tifffile. A truncated or corrupt file (a broken page chain, a page whose data run past the
+end of the file: :mod:`metasensor.io.tiff`) is reported at open time as one clear line. The
+file is opened read-only and never modified.
 """
 
 from __future__ import annotations
 
-import logging
-import os
 from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
 
+from metasensor.io.tiff import open_tiff
+
 __all__ = ["RawFrames", "open_raw", "write_raw"]
-
-
-class _TiffWarnings(logging.Handler):
-    """Collect tifffile's logged warnings (it logs, not raises, on a broken page chain)."""
-
-    def __init__(self) -> None:
-        super().__init__(logging.WARNING)
-        self.messages: list[str] = []
-
-    def emit(self, record: logging.LogRecord) -> None:
-        self.messages.append(record.getMessage())
-
-    def __enter__(self) -> _TiffWarnings:
-        self._logger = logging.getLogger("tifffile")
-        self._propagate = self._logger.propagate
-        self._logger.addHandler(self)
-        self._logger.propagate = False
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self._logger.removeHandler(self)
-        self._logger.propagate = self._propagate
 
 
 class RawFrames:
@@ -69,20 +48,9 @@ class RawFrames:
         path = self.path
         if not path.is_file():
             raise FileNotFoundError(f"raw frames not found: {path}")
-        size = os.path.getsize(path)
-        try:
-            tif = tifffile.TiffFile(path, mode="rb")
-        except Exception as exc:  # tifffile raises many types for corrupt files
-            raise ValueError(f"{path}: not a readable TIFF ({type(exc).__name__}: {exc})") from None
+        tif, pages = open_tiff(path)  # truncated/corrupt files: one ValueError line
         self._tif = tif
         try:
-            with _TiffWarnings() as warned:
-                pages = list(tif.pages)
-            if warned.messages:
-                raise ValueError(f"{path}: truncated or corrupt TIFF after page {len(pages)} "
-                                 f"({warned.messages[0]})")
-            if not pages:
-                raise ValueError(f"{path}: TIFF has no pages")
             first = pages[0]
             shape = tuple(first.shape)
             if len(shape) != 2:
@@ -91,10 +59,6 @@ class RawFrames:
                 if tuple(page.shape) != shape or page.dtype != first.dtype:
                     raise ValueError(f"{path}: page {k} is {page.dtype} {page.shape}, unlike "
                                      f"page 0 ({first.dtype} {shape})")
-                offsets, counts = page.dataoffsets, page.databytecounts
-                if not offsets or max(o + c for o, c in zip(offsets, counts, strict=True)) > size:
-                    raise ValueError(f"{path}: truncated TIFF (page {k} of {len(pages)} runs past "
-                                     f"the end of the {size}-byte file)")
         except ValueError:
             self.close()
             raise

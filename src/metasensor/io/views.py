@@ -17,6 +17,7 @@ import numpy as np
 
 from metasensor.config import SystemConfig
 from metasensor.io.atomic import atomic_path
+from metasensor.io.tiff import TiffReadError, TiffWarnings, read_tiff, truncated, unreadable
 
 __all__ = ["write_views", "read_views", "read_config_from_views", "description",
            "stored_extras", "check_against_stored"]
@@ -88,10 +89,10 @@ def read_views(path: str | Path, nnum: int | None = None, mmap: bool = False) ->
     """Read a view stack written by :func:`write_views` (or any ``nnum²``-page TIFF).
 
     ``nnum`` is taken from the metadata, else from the page count (which must be a square).
-    ``.zarr`` stores are returned lazily as a zarr array (index it to load blocks).
+    ``.zarr`` stores are returned lazily as a zarr array (index it to load blocks). A truncated
+    or corrupt TIFF (a broken page chain, data past the end of the file, fewer pages than its
+    description names) is one ``ValueError`` line (:mod:`metasensor.io.tiff`).
     """
-    import tifffile
-
     path = Path(path)
     if not path.exists():
         raise FileNotFoundError(f"view stack not found: {path}")
@@ -102,11 +103,7 @@ def read_views(path: str | Path, nnum: int | None = None, mmap: bool = False) ->
         if arr.ndim != 4:
             raise ValueError(f"{path}: expected a 4-D (nnum, nnum, H, W) array, got {arr.shape}")
         return arr
-    try:
-        with tifffile.TiffFile(path) as tif:
-            pages = tif.asarray(out="memmap") if mmap else tif.asarray()
-    except Exception as exc:  # tifffile raises many types for corrupt files
-        raise ValueError(f"{path}: not a readable TIFF view stack ({exc})") from None
+    pages = read_tiff(path, mmap=mmap)  # not a TIFF, truncated or corrupt: one ValueError line
     if pages.size == 0:
         raise ValueError(f"{path}: not a readable TIFF view stack (no image data)")
     if pages.ndim == 2:
@@ -131,11 +128,15 @@ def _stored_meta(path: Path) -> dict | None:
 
         meta = dict(zarr.open_array(str(path), mode="r").attrs)
     else:
-        try:
-            with tifffile.TiffFile(path) as tif:
-                desc = tif.pages[0].description
+        warned = TiffWarnings()  # tifffile's logged warnings: kept off stderr, named here
+        try:  # page 0 only (the rest of the chain is read_views' to check)
+            with warned, tifffile.TiffFile(path) as tif:
+                desc = tif.pages.first.description
         except Exception as exc:
-            raise ValueError(f"{path}: not a readable TIFF ({exc})") from None
+            detail = warned.messages[0] if warned.messages else f"{type(exc).__name__}: {exc}"
+            raise unreadable(path, detail) from None
+        if warned.messages:  # page 0's tags cut short: its description cannot be trusted
+            raise truncated(path, warned.messages[0])
         try:
             meta = json.loads(desc)
         except json.JSONDecodeError:
@@ -146,10 +147,13 @@ def _stored_meta(path: Path) -> dict | None:
 def read_config_from_views(path: str | Path, strict: bool = True) -> SystemConfig | None:
     """The SystemConfig stored in a view stack's metadata, or ``None``. ``strict=False``: a
     stored configuration that cannot be read (an older version's field, a foreign description)
-    is named on stderr and counts as none (for callers given a configuration of their own)."""
+    is named on stderr and counts as none (for callers given a configuration of their own); a
+    file that is not a readable TIFF, or a truncated or corrupt one, is an error either way."""
     if not strict:
         try:
             return read_config_from_views(path)
+        except TiffReadError:  # not a TIFF, truncated, corrupt: its reader would fail anyway
+            raise
         except ValueError as exc:  # ConfigError is a ValueError
             import sys
 

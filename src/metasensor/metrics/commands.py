@@ -13,13 +13,12 @@ def read_image(path: str | Path, what: str = "image") -> np.ndarray:
     p = Path(path)
     if not p.is_file():
         raise FileNotFoundError(f"{what} file not found: {p}")
-    try:
-        if p.suffix.lower() == ".npy":
-            arr = np.load(p, allow_pickle=False)
-        else:
-            import tifffile
+    from metasensor.io.tiff import TiffReadError, read_tiff
 
-            arr = tifffile.imread(p)
+    try:
+        arr = np.load(p, allow_pickle=False) if p.suffix.lower() == ".npy" else read_tiff(p)
+    except TiffReadError as exc:  # already one line naming the file
+        raise ValueError(f"{what}: {exc}") from None
     except Exception as exc:  # noqa: BLE001 - any reader failure is a bad file
         raise ValueError(f"cannot read {what} {p}: {exc}".splitlines()[0]) from None
     arr = np.squeeze(np.asarray(arr))

@@ -166,14 +166,24 @@ def load_scene(name: str, size: int = 512, shape=None) -> np.ndarray:
 
 
 def _read_image(path: Path) -> np.ndarray:
+    """A scene image file as grey [0, 1]. A TIFF is read checked (truncated or corrupt: one
+    ``ValueError`` line, :func:`metasensor.io.tiff.read_tiff`); any other file that no reader
+    decodes is ``ValueError("<path>: not a readable image (...)")``, one line."""
     if path.suffix.lower() in (".tif", ".tiff"):
-        import tifffile
+        from metasensor.io.tiff import read_tiff
 
-        img = tifffile.imread(path)
+        img = read_tiff(path)
     else:
         import skimage.io
 
-        img = skimage.io.imread(path)
+        try:
+            img = skimage.io.imread(path)
+        except Exception as exc:  # noqa: BLE001 - PIL/imageio raise many types for bad files
+            detail = (str(exc).strip().splitlines() or [""])[0]
+            if "Could not find a backend" in detail:  # imageio: no plugin decodes the bytes
+                detail = "no image reader recognises its contents"
+            raise ValueError(f"{path}: not a readable image ({type(exc).__name__}: "
+                             f"{detail})") from None
     img = np.asarray(img, dtype=np.float64)
     if img.ndim == 3 and img.shape[-1] in (3, 4):
         from skimage.color import rgb2gray

@@ -1,0 +1,71 @@
+"""benchmarks/run_all.py: quick runs keep off the full-run JSON; unknown names are an error."""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+from pathlib import Path
+
+import pytest
+
+RUN_ALL = Path(__file__).resolve().parents[1] / "benchmarks" / "run_all.py"
+
+
+@pytest.fixture()
+def run_all(tmp_path, monkeypatch):
+    spec = importlib.util.spec_from_file_location("run_all_under_test", RUN_ALL)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    bench = tmp_path / "bench"
+    bench.mkdir()
+    (bench / "bench_fake.py").write_text(
+        "def run(quick=False):\n    return [{'quick': quick, 'value': 1.5}]\n")
+    (bench / "bench_other.py").write_text("def run(quick=False):\n    return []\n")
+    monkeypatch.setattr(module, "HERE", bench)
+    monkeypatch.setattr(module, "machine", lambda: {"python": "test"})
+    return module
+
+
+def test_quick_run_writes_quick_json_and_keeps_full(run_all, tmp_path):
+    out = tmp_path / "results"
+    out.mkdir()
+    full = out / "fake.json"
+    full.write_text('{"rows": "full"}')
+    assert run_all.main(["--quick", "fake", "--out", str(out)]) == 0
+    assert full.read_text() == '{"rows": "full"}'
+    quick = json.loads((out / "fake_quick.json").read_text())
+    assert quick["quick"] is True and quick["rows"] == [{"quick": True, "value": 1.5}]
+    assert not (out / "other_quick.json").exists()
+
+
+def test_full_run_writes_plain_json(run_all, tmp_path):
+    out = tmp_path / "results"
+    assert run_all.main(["fake", "--out", str(out)]) == 0
+    assert json.loads((out / "fake.json").read_text())["quick"] is False
+    assert not (out / "fake_quick.json").exists()
+
+
+def test_default_out_folder_is_results_next_to_the_benchmarks(run_all):
+    assert run_all.main(["--quick", "fake"]) == 0
+    assert (run_all.HERE / "results" / "fake_quick.json").is_file()
+    assert not (run_all.HERE / "results" / "fake.json").exists()
+
+
+def test_unknown_name_exits_nonzero_with_one_line(run_all, tmp_path, capsys):
+    out = tmp_path / "results"
+    assert run_all.main(["--quick", "nope", "fake", "--out", str(out)]) != 0
+    captured = capsys.readouterr()
+    lines = captured.err.strip().splitlines()
+    assert len(lines) == 1
+    assert "nope" in lines[0] and "fake" in lines[0] and "other" in lines[0]
+    assert "== fake ==" not in captured.out
+    assert not out.exists()
+
+
+def test_real_benchmark_names_are_accepted(tmp_path, capsys):
+    spec = importlib.util.spec_from_file_location("run_all_real", RUN_ALL)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    assert module.main(["no_such_bench", "--out", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert "psf" in err and "dao" in err
