@@ -102,7 +102,8 @@ def run(quick: bool = False) -> list[dict]:
             from pathlib import Path
 
             _figure(view, out[-1] / gains[-1], truth,
-                    Path(__file__).resolve().parent / "results" / "motion.png", size)
+                    Path(__file__).resolve().parent / "results"
+                    / ("motion_quick.png" if quick else "motion.png"), size)
         rows.append({
             "scene": kind, "views": n_views, "view_px": f"{size}x{size}",
             "moving_frac": float(plan.affected.mean()) if not plan.empty else 0.0,

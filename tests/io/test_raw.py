@@ -74,3 +74,14 @@ def test_rgb_pages_rejected(tmp_path):
     tifffile.imwrite(path, np.zeros((2, 20, 20, 3), np.uint8), photometric="rgb")
     with pytest.raises(ValueError, match="2-D greyscale"):
         open_raw(path)
+
+
+@pytest.mark.parametrize("mmap", [True, False])
+def test_one_ifd_contiguous_series_gives_every_frame(tmp_path, mmap):
+    # tifffile truncate=True / ImageJ over 4 GB: one IFD for all frames (was read as 1 frame)
+    frames = (np.arange(9 * 32 * 40) % 4000).reshape(9, 32, 40).astype(np.uint16)
+    tifffile.imwrite(tmp_path / "ij.tif", frames, imagej=True, truncate=True)
+    with open_raw(tmp_path / "ij.tif", mmap=mmap) as raw:
+        assert raw.shape == (9, 32, 40)
+        np.testing.assert_array_equal(raw.read(), frames)
+        np.testing.assert_array_equal(raw[5], frames[5])

@@ -98,3 +98,23 @@ def test_realign_with_calibration_names_the_bad_frame(tmp_path):
     res = run(app, ["realign", str(tmp_path / "raw.tif"), "--calib", str(tmp_path / "c.toml"),
                     "--out", str(tmp_path / "v.tif")])
     assert res.exit_code != 0 and "frame 3" in str(res.exception)
+
+
+def test_single_frame_calibration_leaves_room_for_the_stage_steps():
+    # from one frame the offsets are nominal: a 2-px margin keeps realign working when the
+    # stage's actual step differs (phase (4, 4) displaced by 2 px here; with no margin realign
+    # stopped: "lenslet blocks leave the sensor"); measured offsets keep every lenslet
+    from metasensor.sensor.calibrate import frame_offset
+    from metasensor.sensor.rectify import rectify_frames
+
+    white = ms.unrealign(pupil_views(), CFG, ORDER).astype(np.float32)
+    assert calibrate(white[0], N, frames=white, scan=5).lenslets == (12, 12)
+    calib = calibrate(white[0], N, scan=5)
+    assert calib.lenslets == (10, 10)
+    frames = white.copy()
+    frames[24] = np.roll(frames[24], (2, 2), (0, 1))
+    frames[24][:2] = 0
+    frames[24][:, :2] = 0
+    out = list(rectify_frames(list(frames), calib, ORDER,
+                              offsets=lambda f, fr, ph: frame_offset(fr, calib, ph, index=f)))
+    assert len(out) == 25 and all(np.isfinite(o).all() for o in out)

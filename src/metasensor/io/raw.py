@@ -68,6 +68,18 @@ class RawFrames:
         self._pages = pages
         self.shape = (len(pages), *shape)
         self.dtype = np.dtype(first.dtype)
+        series = tuple(tif.series[0].shape) if tif.series else ()
+        if len(series) == 3 and series[1:] == shape and series[0] > len(pages):
+            # one IFD for a contiguous series (tifffile truncate=True, ImageJ over 4 GB): the
+            # frames are only reachable through the series' data, mapped
+            try:
+                self._mm = tifffile.memmap(path, mode="r").reshape(series)
+            except Exception as exc:
+                self.close()
+                raise ValueError(f"{path}: {series[0]} frames stored as one contiguous series "
+                                 f"that cannot be memory-mapped ({type(exc).__name__})") from None
+            self.shape = series
+            return
         if mmap and tif.series and tif.series[0].dataoffset is not None \
                 and tuple(tif.series[0].shape) in (self.shape, self.shape[1:]):
             try:

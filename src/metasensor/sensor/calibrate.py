@@ -223,7 +223,17 @@ def measure_offsets(frames, grid: dict, nominal: list[tuple[float, float]]) -> n
     return np.array(out)
 
 
-_BORDER = -0.5  # default of ``border``: a block may overhang the sensor by half a pixel
+_BORDER = -0.5  # a block may overhang the sensor by half a pixel (known offsets)
+# Offsets only nominal (one frame of a scan, or adapt() to another scan): the stage's actual
+# steps, measured per frame by realign, may differ by a pixel or two, and a block pushed off the
+# sensor stops realign; keep this margin for them.
+_JITTER_BORDER = 2.0
+
+
+def _default_border(border: float | None, measured: bool, scan: int, moving: str) -> float:
+    if border is not None:
+        return float(border)
+    return _BORDER if measured or scan == 1 or moving != "mla" else _JITTER_BORDER
 
 
 def _keep_lenslets(point, matrix, nnum: int, shape: tuple[int, int], shifts: list,
@@ -266,7 +276,7 @@ def _keep_lenslets(point, matrix, nnum: int, shape: tuple[int, int], shifts: lis
 
 def calibrate(white, nnum: int, frames=None, scan: int = 1, scan_order=None,
               moving: str = "mla", pitch_range: tuple[float, float] | None = None,
-              border: float = _BORDER) -> Calibration:
+              border: float | None = None) -> Calibration:
     """Calibrate the lenslet grid from ``white`` ``(H, W)`` (a flat-field frame, or any raw
     frame of phase (0, 0) of a textured scene).
 
@@ -274,8 +284,10 @@ def calibrate(white, nnum: int, frames=None, scan: int = 1, scan_order=None,
     ``scan_order``; a sequence of 2-D frames works too): their actual grid displacements are
     measured (``moving="mla"``) and stored against nominal. Returns a :class:`Calibration`
     whose rectified grid keeps the lenslets whose blocks lie on the sensor at every phase (their
-    outermost pixel centres ``border`` px inside the sensor's; the default -0.5 tolerates half a
-    pixel of overhang, so a block that exactly tiles the sensor edge is kept).
+    outermost pixel centres ``border`` px inside the sensor's). Default: -0.5 (half a pixel of
+    overhang, so a block that exactly tiles the sensor edge is kept) when the offsets are
+    measured (``frames``) or nothing moves; 2 px when they are nominal, a margin for the
+    stage's actual steps that realign measures per frame.
     """
     from metasensor.sensor.scan import check_scan_order
 
@@ -305,6 +317,7 @@ def calibrate(white, nnum: int, frames=None, scan: int = 1, scan_order=None,
         else:
             offsets = [(0.0, 0.0)] * len(order)
     shifts = offsets if offsets is not None else nominal
+    border = _default_border(border, offsets is not None, scan, moving)
     origin, lenslets = _keep_lenslets(grid["point"], m, nnum, white.shape, shifts, border)
     return Calibration(nnum=nnum, pitch=grid["pitch"], rotation=grid["rotation"],
                        center=tuple(origin), lenslets=lenslets, sensor_shape=white.shape,
@@ -355,7 +368,7 @@ def frame_offset(frame, calib: Calibration, phase: tuple[int, int],
 
 
 def adapt(calib: Calibration, scan: int, scan_order=None, moving: str = "mla",
-          border: float = _BORDER) -> Calibration:
+          border: float | None = None) -> Calibration:
     """The calibration for a capture with this scan: the same grid, offsets re-keyed to
     ``scan_order`` when the scans match, else nominal offsets (measure them per frame) and the
     kept lenslets recomputed for the new scan margin."""
@@ -366,6 +379,7 @@ def adapt(calib: Calibration, scan: int, scan_order=None, moving: str = "mla",
         offsets = None if calib.offsets is None else tuple(calib.offset(p) for p in order)
         return calib.replace(scan_order=tuple(order), offsets=offsets)
     base = calib.replace(scan=scan, scan_order=tuple(order), moving=moving, offsets=None)
+    border = _default_border(border, False, scan, moving)  # nominal offsets
     origin, lenslets = _keep_lenslets(np.asarray(calib.center, float), base.matrix, calib.nnum,
                                       calib.sensor_shape, list(base.nominal_offsets), border)
     # the flat field is stored per lenslet of the original kept grid: track where we are in it

@@ -35,7 +35,8 @@ class Calibration:
     pitch : lenslet pitch on the raw sensor [px] (exactly ``nnum`` for a perfect sensor).
     rotation : rotation of the lenslet grid [deg], from +x towards +y.
     center : (row, col) on the sensor of the centre of rectified lenslet (0, 0) at phase (0, 0).
-    lenslets : (Ly, Lx) lenslets kept by rectification (fully on the sensor at every phase).
+    lenslets : (Ly, Lx) lenslets kept by rectification (on the sensor at every phase, within
+        the border calibrate() allows).
     sensor_shape : (rows, cols) of the raw frames the calibration was made for.
     scan, moving, scan_order : the scan of the calibration frames.
     offsets : measured grid displacement [px] of every phase in ``scan_order`` (``None``: the

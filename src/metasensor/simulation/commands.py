@@ -140,7 +140,9 @@ def register(app: typer.Typer) -> None:
 
         # the capture files written (or removed as stale) must not be what this run reads
         refuse_overwrite([out / name for name in CAPTURE_FILES],
-                         [Path(scene), config, Path(zernike) if zernike.endswith(".npy") else None])
+                         [Path(scene), config,
+                          Path(zernike.strip()) if zernike.strip().lower().endswith(".npy")
+                          else None])
         cfg = SystemConfig.from_toml(config) if config is not None else SystemConfig()
         if size < 8:
             raise ValueError(f"--size must be at least 8, got {size}")

@@ -114,21 +114,53 @@ def add_noise(clean: np.ndarray, snr_db: float | None, photons: float | None,
         c = flat[s:s + 2**22].astype(np.float64)
         s1, s2 = s1 + float(c.sum()), s2 + float(c @ c)
     gain = gain_for_snr(s1, s2, flat.size, snr_db, read_noise)
-    model = NoiseModel(gain, read_noise, bit_depth)
-    noisy = apply_noise(clean, model, np.random.default_rng(seed))
-    for _ in range(5):  # clipping moves the SNR: correct the gain on the realised noise
-        got = measure_snr(clean, noisy)
-        if abs(got - snr_db) <= 0.1:
-            break
-        # noise power ~ gain (Poisson-dominated): correct the gain by the dB error
-        model = NoiseModel(model.gain * 10.0 ** ((got - snr_db) / 10.0), read_noise, bit_depth)
+    return _search_gain(clean, snr_db, gain, read_noise, bit_depth, seed)
+
+
+SNR_TOLERANCE_DB = 0.1  # the search stops within this of the target
+SNR_ACCEPT_DB = 0.5  # after SNR_STEPS, a realised SNR within this is still accepted
+SNR_STEPS = 30
+MAX_GAIN_FACTOR = 1e3  # gain at most this x full scale (a thousandth of a photon at full scale)
+
+
+def _search_gain(clean, snr_db: float, gain: float, read_noise: float, bit_depth: int, seed
+                 ) -> tuple[np.ndarray, NoiseModel]:
+    """Gain whose realised SNR (same seed) is ``snr_db``: clipping at 0 and full scale moves the
+    SNR away from the expected one (gain_for_snr), so the gain is corrected on the realised
+    noise: steps by the Poisson law (noise power ~ gain) until the target is bracketed, then
+    regula falsi in log gain. The SNR falls as the gain rises; one still above the target at
+    ``MAX_GAIN_FACTOR`` x full scale cannot be reached (one-line ValueError)."""
+    max_log = math.log(MAX_GAIN_FACTOR * (2**bit_depth - 1))
+
+    def realise(g):
+        model = NoiseModel(g, read_noise, bit_depth)
         noisy = apply_noise(clean, model, np.random.default_rng(seed))
-    else:
-        got = measure_snr(clean, noisy)
-        if abs(got - snr_db) > SNR_TOLERANCE_DB:
-            raise ValueError(f"snr_db {snr_db:g} cannot be reached: clipping at 0 and full scale "
-                             f"leaves {got:.2f} dB (a lower SNR needs a signed detector model)")
-    return noisy, model
+        return noisy, model, measure_snr(clean, noisy)
 
-
-SNR_TOLERANCE_DB = 0.5  # a realised SNR further than this from the target is refused
+    noisy, model, got = realise(gain)
+    above = below = None  # (log gain, SNR) with SNR above / below the target
+    for _ in range(SNR_STEPS):
+        if abs(got - snr_db) <= SNR_TOLERANCE_DB:
+            return noisy, model
+        lg = math.log(model.gain)
+        if got > snr_db:
+            above = (lg, got)
+        else:
+            below = (lg, got)
+        if above is not None and below is not None:
+            (la, sa), (lb, sb) = above, below
+            lg = la + (sa - snr_db) * (lb - la) / (sa - sb)
+        else:
+            lg = lg + (got - snr_db) / 10.0 * math.log(10.0) * (2.0 if below is None else 1.0)
+            if below is None and lg >= max_log:
+                if above[0] >= max_log:
+                    raise ValueError(
+                        f"snr_db {snr_db:g} cannot be reached: clipping at 0 and full scale "
+                        f"keeps the SNR at {got:.2f} dB even at a thousandth of a photon "
+                        "per full scale")
+                lg = max_log
+        noisy, model, got = realise(math.exp(lg))
+    if abs(got - snr_db) <= SNR_ACCEPT_DB:
+        return noisy, model
+    raise ValueError(f"snr_db {snr_db:g} cannot be reached: the closest is {got:.2f} dB "
+                     "(quantisation and clipping limit it for this scene)")
