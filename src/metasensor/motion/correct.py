@@ -10,7 +10,10 @@ original value, so static regions come out bit-for-bit unchanged.
 
 Object motion: one flow (centre view, or the sharpest) serves all views, and the interpolation
 plan (triangulation) is built once. Turbulence: every view gets its own smooth flow from
-non-rigid registration.
+non-rigid registration; a registration flow counts only where it makes the dense view more
+consistent (:mod:`.consistency`), since between aliased sub-images a static scene yields flows
+of about a view pixel (a static 210-px simulated chart had 65.9 % of its centre view moved and
+its reconstruction SSIM fell from 0.90 to 0.33 before this test).
 """
 
 from __future__ import annotations
@@ -21,6 +24,7 @@ from collections.abc import Iterator, Sequence
 import numpy as np
 from scipy import ndimage
 
+from metasensor.motion.consistency import dense_confidence
 from metasensor.motion.flow import (
     FLOW_METHODS,
     _few_threads,
@@ -82,9 +86,11 @@ def estimate_motion(view: np.ndarray, scan_order, reference: int | None = None,
                     occlusion_tol: float | None = 1.0) -> np.ndarray:
     """Motion of every view sample relative to the reference time: ``(2, H, W)`` (dy, dx) view
     pixels, exactly zero where the motion is below ``threshold`` (static) or does not explain
-    the data better than no motion (warping residual ratio ≥ ``max_ratio``; 1 disables the
-    test). ``method``: "dis" (default), "farneback" or "registration" (smooth non-rigid, for
-    turbulence; ``grid`` control points per sub-image). Inside the moving region, samples that
+    the data better than no motion (residual ratio ≥ ``max_ratio``; 1 disables the test:
+    optical flow: warping residual between the sub-images; registration: leave-one-out error
+    of the dense view, :func:`.consistency.dense_confidence`). ``method``: "dis" (default),
+    "farneback" or "registration" (smooth non-rigid, for turbulence; at most ``grid`` control
+    points per sub-image, :func:`.flow.registration_grid`). Inside the moving region, samples that
     fail the forward–backward flow check (``occlusion_tol`` view px; None disables; optical
     flow only) are occluded at the reference time: their motion is NaN and they are left out of
     the interpolation."""
@@ -98,7 +104,11 @@ def estimate_motion(view: np.ndarray, scan_order, reference: int | None = None,
         if occlusion_tol is not None:
             occ = occlusions(view, order, ref, m, method=method, tol=occlusion_tol)
     m = ndimage.gaussian_filter(m, (0, 0, smooth, smooth)) if smooth > 0 else m
-    conf = motion_confidence(view, order, ref, m) if max_ratio < 1 else None
+    conf = None
+    if max_ratio < 1 and method == "registration":  # sub-image aliasing: test in the dense view
+        conf = dense_confidence(view, order, _dense(m, order, view.shape))
+    elif max_ratio < 1:
+        conf = motion_confidence(view, order, ref, m)
     m = suppress_static(m, threshold=threshold, confidence=conf, max_ratio=max_ratio)
     if occ is not None:
         region = np.any(m != 0, axis=(0, 1))

@@ -1,0 +1,74 @@
+"""Significance of a motion hypothesis in the dense view domain (leave-one-out test).
+
+A flow estimated between two scan-phase sub-images (sampled every ``p`` view pixels) is
+biased wherever the sub-images alias: a static scene then yields a *pseudo-flow*. Measured
+with the smooth non-rigid registration of :func:`.flow.registration_flows` (smoothed 1 px) on
+static, noise-free natural views (Gaussian blur 1 view px; 13, 27 and 40 px sub-images, two
+scenes each): median 0.7-1.2 view px, about as large as the 1 px r.m.s. turbulence it is
+meant to find (flow median 1.4-1.7 there). The warping residual between the two sub-images
+(:func:`.flow.motion_confidence`, the quantity the registration minimises) cannot tell them
+apart: ratio motion/static below 0.5 at 0.3-11 % of the static samples and at only 29-64 % of
+the turbulent ones.
+
+The dense view itself is sampled finely enough to resolve the scene: there the question
+becomes whether the moved samples agree with their neighbours from *other* frames. Every
+sample is predicted from the samples around it (Gaussian kernel regression, itself left out)
+once at the grid positions (static hypothesis) and once at the moved positions ``P + M``
+(motion hypothesis). A pseudo-flow scatters a static scene's samples and raises that error;
+a true flow gathers a moving scene's samples and lowers it. Measured on the same views: error
+ratio motion/static median 2.6-3.4 on the static views (below 0.5 at 0.2-0.5 % of the
+samples) and 0.23-0.31 on the turbulent ones (below 0.5 at 68-81 %).
+Hand-written.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy import ndimage
+
+__all__ = ["loo_error", "dense_confidence"]
+
+
+def loo_error(view: np.ndarray, motion: np.ndarray, sigma: float = 0.8,
+              radius: float = 2.0) -> np.ndarray:
+    """Leave-one-out prediction error ``(H, W)`` (squared) of every sample of ``view``
+    ``(H, W)`` placed at ``(y, x) + motion`` (``(2, H, W)``, view px): the sample minus the
+    Gaussian-weighted (``sigma``) mean of the other samples within ``radius`` view px. A sample
+    with no neighbour gets NaN."""
+    from scipy.spatial import cKDTree
+
+    h, w = view.shape
+    yy, xx = np.mgrid[0:h, 0:w].astype(np.float64)
+    pts = np.column_stack([(yy + motion[0]).ravel(), (xx + motion[1]).ravel()])
+    vals = np.asarray(view, np.float64).ravel()
+    pairs = cKDTree(pts).query_pairs(radius, output_type="ndarray")
+    i, j = pairs[:, 0], pairs[:, 1]
+    wt = np.exp(-((pts[i] - pts[j]) ** 2).sum(axis=1) / (2 * sigma ** 2))
+    n = len(vals)
+    num = np.bincount(i, wt * vals[j], n) + np.bincount(j, wt * vals[i], n)
+    den = np.bincount(i, wt, n) + np.bincount(j, wt, n)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        err = (vals - num / den) ** 2
+    return err.reshape(h, w)
+
+
+def dense_confidence(view: np.ndarray, order: list[tuple[int, int]], motion: np.ndarray,
+                     window: float = 2.0) -> np.ndarray:
+    """Per-frame ratio ``(T, h, w)`` of the local leave-one-out error (:func:`loo_error`) of the
+    motion hypothesis ``motion`` (dense ``(2, H, W)`` view px) to that of the static one,
+    each frame on its own sub-image grid (as :func:`.flow.sub_images`), errors averaged over
+    a Gaussian ``window`` (sub-image px). < 1: the motion makes the dense view more
+    consistent. Samples that the motion isolates count with their static error."""
+    p = int(round(len(order) ** 0.5))
+    motion = np.nan_to_num(np.asarray(motion, np.float64))
+    e0 = loo_error(view, np.zeros_like(motion))
+    e1 = loo_error(view, motion)
+    e0 = np.nan_to_num(e0)
+    e1 = np.where(np.isnan(e1), e0, e1)
+    h, w = view.shape[0] // p, view.shape[1] // p
+    ratio = np.ones((len(order), h, w), np.float32)
+    for t, (r, c) in enumerate(order):
+        a = ndimage.gaussian_filter(e1[r::p, c::p][:h, :w], window)
+        b = ndimage.gaussian_filter(e0[r::p, c::p][:h, :w], window)
+        ratio[t] = a / np.maximum(b, 1e-30)
+    return ratio
