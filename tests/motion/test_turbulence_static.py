@@ -86,3 +86,16 @@ def test_simulated_static_chart_unchanged():
         view = cap.views[uv]
         out = correct_motion(view, cap.scan_order, method="registration")
         np.testing.assert_array_equal(out, view)
+
+
+def test_flat_view_gives_no_evidence_either_way():
+    # zero leave-one-out error with and without the motion (a flat background): ratio 1, not
+    # 0/0 read as 0 (which passed meaningless registration flows there)
+    from metasensor.motion.consistency import dense_confidence
+
+    view = np.zeros((120, 120), np.float32)
+    view[78:102, 78:102] = 1000.0  # sub-image px 26-34; the corner checked is 0-5
+    order = [(r, c) for r in range(3) for c in range(3)]
+    motion = np.random.default_rng(0).normal(0, 2, (2, 120, 120))
+    ratio = dense_confidence(view, order, motion)
+    assert np.all(ratio[:, :6, :6] == 1.0)

@@ -52,23 +52,33 @@ def loo_error(view: np.ndarray, motion: np.ndarray, sigma: float = 0.8,
     return err.reshape(h, w)
 
 
+FLOOR_FRAC = 0.01  # error floor: (this x the view's 0.5-99.5 % range)², see dense_confidence
+
+
 def dense_confidence(view: np.ndarray, order: list[tuple[int, int]], motion: np.ndarray,
-                     window: float = 2.0) -> np.ndarray:
+                     window: float = 2.0, floor_frac: float = FLOOR_FRAC) -> np.ndarray:
     """Per-frame ratio ``(T, h, w)`` of the local leave-one-out error (:func:`loo_error`) of the
     motion hypothesis ``motion`` (dense ``(2, H, W)`` view px) to that of the static one,
     each frame on its own sub-image grid (as :func:`.flow.sub_images`), errors averaged over
     a Gaussian ``window`` (sub-image px). < 1: the motion makes the dense view more
-    consistent. Samples that the motion isolates count with their static error."""
+    consistent. Samples that the motion isolates count with their static error. Where the
+    static error is below the floor ``(floor_frac · range)²``, or the motion lowers it by less
+    than that, there is no evidence of motion: ratio 1. (A flat background has zero error both
+    ways; its ratio 0/0 read as 0 passed the meaningless flows there, and hole filling then
+    moved a whole static object: 88.9 % of a patch-on-black view.)"""
     p = int(round(len(order) ** 0.5))
     motion = np.nan_to_num(np.asarray(motion, np.float64))
     e0 = loo_error(view, np.zeros_like(motion))
     e1 = loo_error(view, motion)
     e0 = np.nan_to_num(e0)
     e1 = np.where(np.isnan(e1), e0, e1)
+    lo, hi = np.percentile(view, [0.5, 99.5])
+    floor = max(float(floor_frac * (hi - lo)) ** 2, 1e-30)
     h, w = view.shape[0] // p, view.shape[1] // p
     ratio = np.ones((len(order), h, w), np.float32)
     for t, (r, c) in enumerate(order):
         a = ndimage.gaussian_filter(e1[r::p, c::p][:h, :w], window)
         b = ndimage.gaussian_filter(e0[r::p, c::p][:h, :w], window)
-        ratio[t] = a / np.maximum(b, 1e-30)
+        weak = (b <= floor) | ((a < b) & (b - a <= floor))  # no evidence either way
+        ratio[t] = np.where(weak, 1.0, a / np.maximum(b, floor))
     return ratio

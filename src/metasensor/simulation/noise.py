@@ -138,8 +138,11 @@ def _search_gain(clean, snr_db: float, gain: float, read_noise: float, bit_depth
         return noisy, model, measure_snr(clean, noisy)
 
     noisy, model, got = realise(gain)
+    best = (noisy, model, got)  # the fixed seed makes the SNR jump with the gain: keep the best
     above = below = None  # (log gain, SNR) with SNR above / below the target
     for _ in range(SNR_STEPS):
+        if abs(got - snr_db) < abs(best[2] - snr_db):
+            best = (noisy, model, got)
         if abs(got - snr_db) <= SNR_TOLERANCE_DB:
             return noisy, model
         lg = math.log(model.gain)
@@ -149,6 +152,8 @@ def _search_gain(clean, snr_db: float, gain: float, read_noise: float, bit_depth
             below = (lg, got)
         if above is not None and below is not None:
             (la, sa), (lb, sb) = above, below
+            if abs(lb - la) < 1e-9:  # bracket closed on a jump of the realised SNR
+                break
             lg = la + (sa - snr_db) * (lb - la) / (sa - sb)
         else:
             lg = lg + (got - snr_db) / 10.0 * math.log(10.0) * (2.0 if below is None else 1.0)
@@ -160,6 +165,9 @@ def _search_gain(clean, snr_db: float, gain: float, read_noise: float, bit_depth
                         "per full scale")
                 lg = max_log
         noisy, model, got = realise(math.exp(lg))
+    if abs(got - snr_db) < abs(best[2] - snr_db):
+        best = (noisy, model, got)
+    noisy, model, got = best
     if abs(got - snr_db) <= SNR_ACCEPT_DB:
         return noisy, model
     raise ValueError(f"snr_db {snr_db:g} cannot be reached: the closest is {got:.2f} dB "
