@@ -19,8 +19,13 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["TiffReadError", "TiffWarnings", "checked_pages", "open_tiff", "read_tiff",
-           "truncated", "unreadable"]
+__all__ = ["TiffReadError", "TiffWarnings", "checked_pages", "first_line", "open_tiff",
+           "read_tiff", "truncated", "unreadable"]
+
+
+def first_line(exc: BaseException) -> str:
+    """``"<type>: <first line of the message>"`` of an exception (readers raise long ones)."""
+    return f"{type(exc).__name__}: {(str(exc).strip().splitlines() or [''])[0]}"
 
 
 class TiffReadError(ValueError):
@@ -103,7 +108,7 @@ def checked_pages(tif, path: Path | str) -> list:
         with TiffWarnings() as warned:
             pages = list(tif.pages)
     except Exception as exc:  # noqa: BLE001 - tifffile raises many types for corrupt files
-        raise truncated(path, f"{type(exc).__name__}: {exc}") from None
+        raise truncated(path, first_line(exc)) from None
     if warned.messages:
         raise truncated(path, f"after page {len(pages)}: {warned.messages[0]}")
     if not pages:
@@ -137,8 +142,7 @@ def open_tiff(path: Path | str):
         with TiffWarnings() as warned:
             tif = tifffile.TiffFile(path, mode="rb")
     except Exception as exc:  # noqa: BLE001 - tifffile raises many types for corrupt files
-        first = (str(exc).strip().splitlines() or [""])[0]
-        raise unreadable(path, f"{type(exc).__name__}: {first}") from None
+        raise unreadable(path, first_line(exc)) from None
     try:
         if warned.messages:
             with TiffWarnings():
@@ -163,8 +167,7 @@ def read_tiff(path: Path | str, *, mmap: bool = False) -> np.ndarray:
         with TiffWarnings() as warned:
             arr = tif.asarray(out="memmap") if mmap else tif.asarray()
     except Exception as exc:  # noqa: BLE001 - tifffile raises many types for corrupt files
-        first = (str(exc).strip().splitlines() or [""])[0]
-        raise truncated(path, f"{type(exc).__name__}: {first}") from None
+        raise truncated(path, first_line(exc)) from None
     finally:
         tif.close()
     if warned.messages:

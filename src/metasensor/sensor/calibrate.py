@@ -203,15 +203,17 @@ def _brightest_phase(img: np.ndarray, point: np.ndarray, g: np.ndarray, pitch: f
     return point + 0.5 * (a[0] + a[1]) if off > on else point
 
 
-def measure_offsets(frames, grid: dict, nominal: list[tuple[float, float]]) -> np.ndarray:
+def measure_offsets(frames, grid: dict, nominal: list[tuple[float, float]],
+                    start: int = 0) -> np.ndarray:
     """Grid displacement [sensor px] of every frame from ``grid["point"]`` (the lattice of the
     reference frame), ``(T, 2)``: the phase change of the lattice components gives it modulo
-    the lattice; the translate nearest ``nominal[t]`` (sensor px) is taken."""
+    the lattice; the translate nearest ``nominal[t]`` (sensor px) is taken. ``start``: the
+    number of the first frame in its file (errors name frames by it)."""
     g = np.asarray(grid["g"])
     ref = np.asarray(grid["point"], float)
     out = []
     for t, frame in enumerate(frames):
-        img = _as_image(frame, f"frame {t}")
+        img = _as_image(frame, f"frame {start + t}")
         crop, origin = _crop(img, int(3 / np.hypot(*g[0])))
         centre = (np.array(crop.shape, float) - 1) / 2 + origin
         dft = _Dft(crop)
@@ -360,10 +362,7 @@ def frame_offset(frame, calib: Calibration, phase: tuple[int, int],
     if k is None:
         raise ValueError(f"phase {tuple(phase)} is not in the calibration's scan order")
     expect = (calib.offsets or calib.nominal_offsets)[k]
-    arr = np.asarray(frame)
-    if index is not None and arr.dtype.kind == "f" and not np.isfinite(arr).all():
-        raise ValueError(f"frame {index} contains NaN or infinite values")
-    off = measure_offsets([frame], grid_of(calib), [expect])[0]
+    off = measure_offsets([frame], grid_of(calib), [expect], start=index or 0)[0]
     return float(off[0]), float(off[1])
 
 

@@ -132,17 +132,20 @@ def _search_gain(clean, snr_db: float, gain: float, read_noise: float, bit_depth
     ``MAX_GAIN_FACTOR`` x full scale cannot be reached (one-line ValueError)."""
     max_log = math.log(MAX_GAIN_FACTOR * (2**bit_depth - 1))
 
+    best = None  # the fixed seed makes the SNR jump with the gain: keep the closest realised
+
     def realise(g):
+        nonlocal best
         model = NoiseModel(g, read_noise, bit_depth)
         noisy = apply_noise(clean, model, np.random.default_rng(seed))
-        return noisy, model, measure_snr(clean, noisy)
+        got = measure_snr(clean, noisy)
+        if best is None or abs(got - snr_db) < abs(best[2] - snr_db):
+            best = (noisy, model, got)
+        return noisy, model, got
 
     noisy, model, got = realise(gain)
-    best = (noisy, model, got)  # the fixed seed makes the SNR jump with the gain: keep the best
     above = below = None  # (log gain, SNR) with SNR above / below the target
     for _ in range(SNR_STEPS):
-        if abs(got - snr_db) < abs(best[2] - snr_db):
-            best = (noisy, model, got)
         if abs(got - snr_db) <= SNR_TOLERANCE_DB:
             return noisy, model
         lg = math.log(model.gain)
@@ -165,8 +168,6 @@ def _search_gain(clean, snr_db: float, gain: float, read_noise: float, bit_depth
                         "per full scale")
                 lg = max_log
         noisy, model, got = realise(math.exp(lg))
-    if abs(got - snr_db) < abs(best[2] - snr_db):
-        best = (noisy, model, got)
     noisy, model, got = best
     if abs(got - snr_db) <= SNR_ACCEPT_DB:
         return noisy, model

@@ -176,14 +176,15 @@ def _read_image(path: Path) -> np.ndarray:
     else:
         import skimage.io
 
+        from metasensor.io.tiff import first_line
+
         try:
             img = skimage.io.imread(path)
         except Exception as exc:  # noqa: BLE001 - PIL/imageio raise many types for bad files
-            detail = (str(exc).strip().splitlines() or [""])[0]
+            detail = first_line(exc)
             if "Could not find a backend" in detail:  # imageio: no plugin decodes the bytes
-                detail = "no image reader recognises its contents"
-            raise ValueError(f"{path}: not a readable image ({type(exc).__name__}: "
-                             f"{detail})") from None
+                detail = f"{type(exc).__name__}: no image reader recognises its contents"
+            raise ValueError(f"{path}: not a readable image ({detail})") from None
     img = np.asarray(img, dtype=np.float64)
     if img.ndim == 3 and img.shape[-1] in (3, 4):
         from skimage.color import rgb2gray
