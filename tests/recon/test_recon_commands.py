@@ -26,6 +26,7 @@ def files(tmp_path_factory):
     bank = gaussian_psfs(nnum=5, radius=4)
     views, _ = synth_views(0.5 + rng.random((60, 60)).astype(np.float32), bank, 1, border=5)
     write_views(tmp / "views.tif", views, CFG)
+    write_views(tmp / "views_origin.tif", views, CFG, extra={"origin": [3.25, -1.5]})
     with h5py.File(tmp / "psf.h5", "w") as f:
         f.create_dataset("psf", data=bank)
         f.attrs["config"] = CFG.to_json()
@@ -58,6 +59,23 @@ def test_reconstruct_cli_writes_image_and_figure(files):
                                    str(files / "psf.h5"), "--iterations", "1", "--out", str(out)])
     assert res.exit_code == 0, res.output
     assert not (out / "image.zarr").exists()
+
+
+def test_reconstruct_records_the_views_origin(files):
+    """realign stores where the views sit on the sensor (origin); the image keeps it (TIFF and
+    Zarr), and an image of views without one has none."""
+    import zarr
+
+    from metasensor.io.views import stored_extras
+
+    out = files / "out_origin"
+    res = CliRunner().invoke(app, ["reconstruct", str(files / "views_origin.tif"), "--psf",
+                                   str(files / "psf.h5"), "--iterations", "1", "--zarr",
+                                   "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    assert stored_extras(out / "image.tif")["origin"] == [3.25, -1.5]
+    assert zarr.open_array(str(out / "image.zarr")).attrs["metasensor"]["origin"] == [3.25, -1.5]
+    assert "origin" not in stored_extras(files / "out" / "image.tif")
 
 
 def test_cli_errors(files):

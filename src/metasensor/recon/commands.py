@@ -26,8 +26,9 @@ def read_psf_file(path: Path, with_attrs: bool = False):
     return (bank, cfg, attrs) if with_attrs else (bank, cfg)
 
 
-def write_outputs(out: Path, rec, views) -> list[Path]:
-    """image.tif (float32, config JSON in the description), zernike.npy, summary.json and a PNG."""
+def write_outputs(out: Path, rec, views, origin=None) -> list[Path]:
+    """image.tif (float32, config JSON in the description), zernike.npy, summary.json and a PNG.
+    ``origin``: the views' stored sensor origin (realign's), recorded with the image."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -39,7 +40,7 @@ def write_outputs(out: Path, rec, views) -> list[Path]:
 
     out.mkdir(parents=True, exist_ok=True)
     image = np.asarray(rec.image, dtype=np.float32)
-    meta = description(rec.config, kind="image", method=rec.method)
+    meta = description(rec.config, **image_meta(rec, origin))
     with atomic_path(out / "image.tif") as tmp:
         tifffile.imwrite(tmp, image, description=json.dumps(meta), metadata=None)
     with atomic_path(out / "zernike.npy") as tmp:
@@ -119,6 +120,16 @@ def _parse_blocks(text: str) -> tuple[int, int]:
     return by, bx
 
 
+def image_meta(rec, origin) -> dict:
+    """What an image's description keeps under "metasensor": its kind, the method, and the
+    sensor ``origin`` (row, col) of the views it came from when they stored one (realign's:
+    image pixel (i, j) is sensor point ``origin + (i + o, j + o)``, docs/conventions.md)."""
+    meta = {"kind": "image", "method": rec.method}
+    if origin is not None:
+        meta["origin"] = origin
+    return meta
+
+
 def register(app: typer.Typer) -> None:
     """Add this stage's commands to app."""
 
@@ -159,7 +170,12 @@ def register(app: typer.Typer) -> None:
         With DAO: metasensor reconstruct views.tif --dao wave --system system.h5 --out result/
         """
         from metasensor.config import SystemConfig
-        from metasensor.io.views import check_against_stored, read_config_from_views, read_views
+        from metasensor.io.views import (
+            check_against_stored,
+            read_config_from_views,
+            read_views,
+            stored_extras,
+        )
         from metasensor.optics.psf_io import parse_zernike
         from metasensor.recon.api import reconstruct
 
@@ -195,6 +211,7 @@ def register(app: typer.Typer) -> None:
             raise ValueError(f"{views}: no system configuration stored; pass --config cfg.toml")
         big = views.suffix.lower() != ".zarr" and views.stat().st_size > 2**29
         stack = read_views(views, nnum=cfg.nnum, mmap=big)  # zarr: lazy, read block by block
+        origin = stored_extras(views).get("origin")
         fz = None
         if field_zernike is not None:
             if not field_zernike.is_file():
@@ -235,7 +252,7 @@ def register(app: typer.Typer) -> None:
         if target is not None:
             from metasensor.io.views import description
 
-            target.attrs.update(description(cfg, kind="image", method=rec.method))
+            target.attrs.update(description(cfg, **image_meta(rec, origin)))
             final = out / "image.zarr"
             shutil.rmtree(final, ignore_errors=True)
             os.replace(partial, final)
@@ -249,7 +266,7 @@ def register(app: typer.Typer) -> None:
             z = np.asarray(psf_attrs.get("zernike", ()), dtype=np.float64).ravel()
             if z.size and np.isfinite(z).all():
                 rec.zernike = np.zeros(rec.zernike.shape[:2] + (z.size,), np.float32) + z
-        written = write_outputs(out, rec, stack)
+        written = write_outputs(out, rec, stack, origin)
         if target is not None:
             written.insert(1, out / "image.zarr")
         if rec.registration_zernike is not None:
