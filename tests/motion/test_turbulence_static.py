@@ -131,3 +131,27 @@ def test_static_star_field_unchanged_in_turbulence_mode():
         view = cap.views[uv]
         out = correct_motion(view, cap.scan_order, method="registration")
         np.testing.assert_array_equal(out, view)
+
+
+def test_unresolved_content_gives_no_evidence_next_to_resolved_content():
+    """One view, natural texture on the left and isolated one-sample spikes on the right, with
+    a random flow everywhere: the spikes' half reads ratio 1 (no evidence either way), the
+    natural half is tested (not all 1); flat views of any level read 0 resolved."""
+    from metasensor.motion.consistency import resolved_fraction
+
+    view, _ = _small_view(rigid_motion((0, 0), REF))
+    view = view.copy()
+    rng = np.random.default_rng(1)
+    spikes = np.zeros((65, 33), np.float32)
+    spikes[rng.integers(0, 65, 40), rng.integers(0, 33, 40)] = 1.0
+    view[:, 32:] = spikes
+    motion = rng.normal(0, 1.0, (2, 65, 65))
+    ratio = dense_confidence(view, ORDER, motion)
+    # sub-image columns >= 11: view columns >= 55, beyond the reach of the resolved-fraction
+    # window (sigma 2p = 10 view px) from the natural half
+    assert np.all(ratio[:, :, 11:] == 1.0)
+    assert np.mean(ratio[:, :, :4] != 1.0) > 0.5
+    ungated = dense_confidence(view, ORDER, motion, resolved_min=0.0)
+    assert np.mean(ungated[:, :, 11:] != 1.0) > 0.1  # without the gate the spikes are tested
+    for level in (0.0, 0.1, 1000.37):
+        assert np.all(resolved_fraction(np.full((60, 60), level), 3) == 0.0)

@@ -27,6 +27,7 @@ def files(tmp_path_factory):
     views, _ = synth_views(0.5 + rng.random((60, 60)).astype(np.float32), bank, 1, border=5)
     write_views(tmp / "views.tif", views, CFG)
     write_views(tmp / "views_origin.tif", views, CFG, extra={"origin": [3.25, -1.5]})
+    write_views(tmp / "views_bad_origin.tif", views, CFG, extra={"origin": "12"})
     with h5py.File(tmp / "psf.h5", "w") as f:
         f.create_dataset("psf", data=bank)
         f.attrs["config"] = CFG.to_json()
@@ -76,6 +77,12 @@ def test_reconstruct_records_the_views_origin(files):
     assert stored_extras(out / "image.tif")["origin"] == [3.25, -1.5]
     assert zarr.open_array(str(out / "image.zarr")).attrs["metasensor"]["origin"] == [3.25, -1.5]
     assert "origin" not in stored_extras(files / "out" / "image.tif")
+    bad = files / "out_bad_origin"  # a malformed stored origin is named and left out
+    res = CliRunner().invoke(app, ["reconstruct", str(files / "views_bad_origin.tif"), "--psf",
+                                   str(files / "psf.h5"), "--iterations", "1", "--out", str(bad)])
+    assert res.exit_code == 0, res.output
+    assert "malformed origin" in res.output
+    assert "origin" not in stored_extras(bad / "image.tif")
 
 
 def test_cli_errors(files):

@@ -13,8 +13,9 @@ plan (triangulation) is built once. Turbulence: every view gets its own smooth f
 non-rigid registration; a registration flow counts only where it makes the dense view more
 consistent (:mod:`.consistency`), since between aliased sub-images a static scene yields flows
 of about a view pixel (a static 210-px simulated chart had 65.9 % of its centre view moved and
-its reconstruction SSIM fell from 0.90 to 0.33 before this test), and only where the
-sub-images resolve the content at all (a static star field: 74.6 % of its samples moved before).
+its reconstruction SSIM fell from 0.90 to 0.33 before this test); content the sub-images do
+not resolve (a star field: 74.6 % of a static one's samples moved before) gives no evidence
+(the moving region is then closed and filled as for object motion).
 """
 
 from __future__ import annotations

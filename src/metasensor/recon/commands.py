@@ -130,6 +130,22 @@ def image_meta(rec, origin) -> dict:
     return meta
 
 
+def _origin(value, views: Path):
+    """A stored origin as [row, col] floats, or None (none stored, or malformed: named on
+    stderr, and left out of the image's description)."""
+    if value is None:
+        return None
+    try:
+        pair = [] if isinstance(value, str | bytes | dict) else [float(v) for v in value]
+    except (TypeError, ValueError):
+        pair = []
+    if len(pair) != 2 or not all(np.isfinite(pair)):
+        typer.echo(f"note: {views} stores a malformed origin {value!r}; the image gets none",
+                   err=True)
+        return None
+    return pair
+
+
 def register(app: typer.Typer) -> None:
     """Add this stage's commands to app."""
 
@@ -211,7 +227,7 @@ def register(app: typer.Typer) -> None:
             raise ValueError(f"{views}: no system configuration stored; pass --config cfg.toml")
         big = views.suffix.lower() != ".zarr" and views.stat().st_size > 2**29
         stack = read_views(views, nnum=cfg.nnum, mmap=big)  # zarr: lazy, read block by block
-        origin = stored_extras(views).get("origin")
+        origin = _origin(stored_extras(views).get("origin"), views)
         fz = None
         if field_zernike is not None:
             if not field_zernike.is_file():
