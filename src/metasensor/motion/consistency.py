@@ -91,7 +91,8 @@ FLOOR_FRAC = 0.01  # error floor: (this x the view's 0.5-99.5 % range)², see de
 
 def dense_confidence(view: np.ndarray, order: list[tuple[int, int]], motion: np.ndarray,
                      window: float = 2.0, floor_frac: float = FLOOR_FRAC,
-                     resolved_min: float = RESOLVED_MIN) -> np.ndarray:
+                     resolved_min: float = RESOLVED_MIN,
+                     resolved: np.ndarray | None = None) -> np.ndarray:
     """Per-frame ratio ``(T, h, w)`` of the local leave-one-out error (:func:`loo_error`) of the
     motion hypothesis ``motion`` (dense ``(2, H, W)`` view px) to that of the static one,
     each frame on its own sub-image grid (as :func:`.flow.sub_images`), errors averaged over
@@ -102,7 +103,8 @@ def dense_confidence(view: np.ndarray, order: list[tuple[int, int]], motion: np.
     ways; its ratio 0/0 read as 0 passed the meaningless flows there, and hole filling then
     moved a whole static object: 88.9 % of a patch-on-black view.) Where the sub-images do not
     resolve the content (:func:`resolved_fraction` below ``resolved_min``: point sources, noise
-    on a flat background) there is no evidence either: ratio 1."""
+    on a flat background) there is no evidence either: ratio 1. ``resolved``: that fraction
+    when the caller already has it (else computed here)."""
     p = int(round(len(order) ** 0.5))
     motion = np.nan_to_num(np.asarray(motion, np.float64))
     e0 = loo_error(view, np.zeros_like(motion))
@@ -112,7 +114,9 @@ def dense_confidence(view: np.ndarray, order: list[tuple[int, int]], motion: np.
     lo, hi = np.percentile(view, [0.5, 99.5])
     floor = max(float(floor_frac * (hi - lo)) ** 2, 1e-30)
     h, w = view.shape[0] // p, view.shape[1] // p
-    unresolved = resolved_fraction(view, p) < resolved_min
+    if resolved is None:
+        resolved = resolved_fraction(view, p)
+    unresolved = resolved < resolved_min
     ratio = np.ones((len(order), h, w), np.float32)
     for t, (r, c) in enumerate(order):
         a = ndimage.gaussian_filter(e1[r::p, c::p][:h, :w], window)

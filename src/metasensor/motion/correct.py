@@ -100,11 +100,12 @@ def estimate_motion(view: np.ndarray, scan_order, reference: int | None = None,
     the interpolation."""
     view = _check_image(view, "view")
     order, p, ref = _resolve(scan_order, reference, view.shape)
-    occ = None
-    if method == "registration" and max_ratio < 1 and not (
-            resolved_fraction(view, p) >= RESOLVED_MIN).any():
-        # nothing the sub-images resolve (a star field): no flow could count
-        return np.zeros((2, *view.shape), np.float32)
+    occ = resolved = None
+    if method == "registration" and max_ratio < 1:
+        resolved = resolved_fraction(view, p)
+        if not (resolved >= RESOLVED_MIN).any():
+            # nothing the sub-images resolve (a star field): no flow could count
+            return np.zeros((2, *view.shape), np.float32)
     if method == "registration":
         m = registration_flows(view, order, ref, grid=grid, device=device)
     else:
@@ -114,7 +115,7 @@ def estimate_motion(view: np.ndarray, scan_order, reference: int | None = None,
     m = ndimage.gaussian_filter(m, (0, 0, smooth, smooth)) if smooth > 0 else m
     conf = None
     if max_ratio < 1 and method == "registration":  # sub-image aliasing: test in the dense view
-        conf = dense_confidence(view, order, _dense(m, order, view.shape))
+        conf = dense_confidence(view, order, _dense(m, order, view.shape), resolved=resolved)
     elif max_ratio < 1:
         conf = motion_confidence(view, order, ref, m)
     m = suppress_static(m, threshold=threshold, confidence=conf, max_ratio=max_ratio)
