@@ -12,7 +12,11 @@ Method (hand-written; numpy/scipy do the transforms and the optimisation):
    aberration). On a textured frame the scene's own spectrum near the lattice frequency adds to
    the peak and moves it: 192-px frames of the chart, camera, astronaut and coffee scenes read
    14.93-15.09 px (up to 0.6 %, 0.5 px of lenslet position 6 lenslets out); higher harmonics
-   (2-4 g) did not remove it (14.97-15.06). Calibrate from a white frame where one exists.
+   (2-4 g) did not remove it (14.97-15.06), nor did dividing the frame by its lenslet-scale
+   mean (14.93-15.08). The bias falls fast with the frame's size (the lattice peak grows with
+   the area, the scene's spectrum near it much less): 384-px frames read 14.990-15.019 px,
+   768-px frames 14.998-15.004 px (0.1 px of lenslet position at the frame's edge, 25 lenslets
+   out). Calibrate from a white frame where one exists, else from the whole sensor.
 3. Pitch and rotation are the similarity that fits both peaks; the phases of ``F(g1)``,
    ``F(g2)`` (coordinates relative to the window centre) give a lattice point: a lenslet centre.
 4. Scan-phase offsets: the phase change of the same two Fourier components between frames
