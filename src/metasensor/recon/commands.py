@@ -49,7 +49,7 @@ def write_outputs(out: Path, rec, views, origin=None) -> list[Path]:
                "solver": rec.solver,  # Richardson-Lucy's parameters; HQS uses neither
                "iterations": rec.iterations if rec.solver == "rl" else None,
                "subsets": rec.subsets if rec.solver == "rl" else None,
-               "seconds": rec.seconds,
+               "seconds": rec.seconds, "views_used": rec.views_used,
                "shape": list(image.shape), "history": rec.history,
                "registration_px": rec.registration,
                "registration_zernike": (None if rec.registration_zernike is None
@@ -170,6 +170,10 @@ def register(app: typer.Typer) -> None:
             help="register the views against the PSF bank first (for banks that may be off)"),
         iterations: int | None = typer.Option(None, help="Richardson-Lucy iterations"),
         subsets: int | None = typer.Option(None, help="view subsets per iteration"),
+        view_radius: float | None = typer.Option(
+            None, "--view-radius", help="use the views within this radius (in views) of the "
+            "centre view; default: the authors' 113 views (radius 6 for nnum 15); the pupil's "
+            "radius (7.5) adds its edge views"),
         zernike: str | None = typer.Option(None, help="global aberration, e.g. '4:0.5,7:-0.2', "
                                             "or a .npy Noll vector (simulate's wavefront.npy)"),
         field_zernike: Path | None = typer.Option(
@@ -260,7 +264,7 @@ def register(app: typer.Typer) -> None:
                               field_zernike=fz, blocks=_parse_blocks(blocks), overlap=overlap,
                               iterations=iterations, device=device, psf=bank, subsets=subsets,
                               scheduler=scheduler, progress=True, out=target, solver=solver,
-                              register=register_views)
+                              register=register_views, view_radius=view_radius)
         except BaseException:
             if target is not None:
                 shutil.rmtree(partial, ignore_errors=True)
