@@ -15,7 +15,7 @@ while ISA's measurement leaves 70 % of its squared singular values below 1e-4 of
 (``bench_isa_limit``). ``sensor2d_denoised_ssim``: the best SSIM that scikit-image's TV
 (Chambolle) or non-local-means denoising reaches on that noisy 2D-sensor image, each tuned with
 the true noise r.m.s. (weights 0.5 / 1 / 2 sigma, h 0.6 / 0.8 sigma): what a classical image prior
-makes of the best-conditioned measurement of the same light (the 2D sensor's own MTF is 0.3-0.6 at
+makes of the best-conditioned measurement of the same light (the 2D sensor's own MTF is 0.2-0.67 at
 the frequencies where ISA's views keep 1-4 %, ``tests/optics/test_psf.py``). Writes a plot
 ``benchmarks/results/isa_quality.png``.
 """

@@ -34,7 +34,8 @@ factorisations (2.5 s per beta). The gain grows with the window: 300 px 7.0 -> 6
 than 70 % of the domain keep the direct product. Across scenes and sizes with the contract call
 (``bench_isa_quality``, 30 dB): chart 0.757 / 0.907 / 0.922 / 0.944 / 0.953 at 105 / 180 / 240 /
 360 / 495 px (its bar periods are fixed in pixels, so a small chart is denser); natural images
-0.66-0.885, where the capture's own noisy 2D sensor reads 0.81-0.90. Non-local means as a
+0.66-0.885, where the capture's own noisy 2D sensor reads 0.81-0.90 (0.86-0.95 after the best
+oracle-tuned TV / non-local-means denoising; camera 0.86-0.88). Non-local means as a
 plug-and-play prior in place of the gradient shrinkage reached 0.72-0.75 on the 180-px camera.
 
 Aberrated and mismatched banks (the prior is not convex, so the start matters; see INIT_REG and
