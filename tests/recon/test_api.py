@@ -136,7 +136,7 @@ def test_bad_input(capture, bank):
         reconstruct(views, CFG.replace(scan=1), psf=bank, solver="hqs")
     with pytest.raises(ValueError, match="scheduler"):
         reconstruct(views, CFG, psf=bank, iterations=1, scheduler="bogus")
-    for radius in (-1.0, float("nan"), "6"):
+    for radius in (-1.0, float("nan"), "6", True):
         with pytest.raises(ValueError, match="view_radius"):
             reconstruct(views, CFG, psf=bank, view_radius=radius)
     assert np.isfinite(views).all()  # inputs untouched

@@ -283,8 +283,9 @@ def reconstruct(views, cfg: SystemConfig, method: str = "isa", zernike=None, fie
         raise ValueError("psf is a complete PSF bank, so zernike/field_zernike would be ignored: "
                          "give the aberration or the bank, not both")
     views = _check_views(views, cfg)
-    if view_radius is not None and not (isinstance(view_radius, int | float | np.number)
-                                        and math.isfinite(view_radius) and view_radius >= 0):
+    if view_radius is not None and (isinstance(view_radius, bool) or not (
+            isinstance(view_radius, int | float | np.number) and math.isfinite(view_radius)
+            and view_radius >= 0)):
         raise ValueError(f"view_radius must be a finite number of views >= 0, got {view_radius!r}")
     try:
         by, bx = (int(blocks[0]), int(blocks[1]))
