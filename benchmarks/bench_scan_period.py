@@ -16,6 +16,16 @@ SNR is 30 dB − 10·log10(p²/25): 44.0 / 34.4 / 30 / 20.5 dB for p = 1 / 3 / 5
 what the sampling density itself adds; ``noise-free`` — no photon or read noise (quantised only),
 the sampling alone (Extended Data Fig. 2 names no noise level).
 
+Two focus positions (``defocus_waves``): ``0`` — the scene on the MLA's conjugate plane, and
+``0.25`` — the scene a little off it (Noll Z4 = 0.25 λ r.m.s., 0.36 mm on the image side: 1.7
+depths of focus λ/NA²), simulated and reconstructed with that defocus. On the conjugate plane every
+view samples the field at the same positions (every scan step d = 15/p px), so what lies beyond
+1/(2d) aliases identically in all of them and only the views' PSF shapes tell the aliases apart;
+off it, each view sees the scene shifted by its parallax (λ·∂W/∂ρ/NA: 4 px at the pupil's edge
+here), a different sampling phase, and the views unmix the aliasing between them (measured: the 5x5
+scan's SSIM rises from 0.92 to 0.96 (chart) and 0.76 to 0.78 (camera) at 30 dB, 0.97 to 0.99
+and 0.87 to 0.94 noise-free, while 15x15 barely changes).
+
 Two ISA solvers (``solver``): ``rl``, Richardson–Lucy (every period), and ``hqs``, the
 sparse-gradient prior (``reconstruct``'s default where it applies: periods 3, 5, 15; a 1x1 scan
 would need 225 x 225 systems per frequency).
@@ -33,6 +43,7 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent / "src"))
 
 PERIODS = (1, 3, 5, 15)
+DEFOCUS = (0.0, 0.25)  # Noll Z4 [waves r.m.s.]: on the MLA's conjugate plane, and off it
 
 
 def truth_scale(cap, bank) -> float:
@@ -72,14 +83,18 @@ def run(quick: bool = False) -> list[dict]:
         scenes.pop("camera")
     rows = []
     budgets = ("per-frame",) if quick else ("per-frame", "equal-light", "noise-free")
-    for budget, name, p in [(b, n, p) for b in budgets for n in scenes for p in PERIODS]:
+    focus = DEFOCUS[:1] if quick else DEFOCUS
+    for df, budget, name, p in [(f, b, n, p) for f in focus for b in budgets for n in scenes
+                                for p in PERIODS]:
         scene = scenes[name]
         cfg = ms.SystemConfig(scan=p)
-        bank = np.asarray(ms.view_psfs(cfg), np.float32)
+        z = np.zeros(4, np.float32)
+        z[3] = df
+        bank = np.asarray(ms.view_psfs(cfg, zernike=z if df else None), np.float32)
         snr = {"per-frame": 30.0, "noise-free": None}.get(
             budget, 30.0 - 10.0 * np.log10(p * p / 25.0))
-        cap = simulate(scene, cfg, snr_db=None if snr is None else float(snr), seed=0,
-                       comparison=False)
+        cap = simulate(scene, cfg, zernike=z if df else None,
+                       snr_db=None if snr is None else float(snr), seed=0, comparison=False)
         k = truth_scale(cap, bank)
         truth = cap.truth * np.float32(k)
         for solver in ("rl", "hqs") if p > 1 else ("rl",):
@@ -88,8 +103,8 @@ def run(quick: bool = False) -> list[dict]:
             sec = time.perf_counter() - t0
             dr = float(truth.max() - truth.min())
             shape = "x".join(map(str, cap.views.shape))
-            rows.append({"budget": budget, "snr_db": None if snr is None else float(snr),
-                         "scene": name, "scan": p,
+            rows.append({"defocus_waves": df, "budget": budget,
+                         "snr_db": None if snr is None else float(snr), "scene": name, "scan": p,
                          "solver": solver, "views_shape": shape,
                          "ssim": float(structural_similarity(truth, rec.image, data_range=dr)),
                          "psnr_db": float(psnr(rec.image, truth, data_range=dr)),
@@ -101,47 +116,50 @@ def run(quick: bool = False) -> list[dict]:
 
 
 def _targets(rows: list[dict]) -> list[dict]:
-    """Issue 5's targets per budget, scene and solver series. The ``default`` series is what
-    ``reconstruct`` runs without a solver: HQS, and Richardson–Lucy for the 1x1 scan."""
+    """Issue 5's targets per focus, budget, scene and solver series. The ``default`` series is
+    what ``reconstruct`` runs without a solver: HQS, and Richardson–Lucy for the 1x1 scan."""
     out = []
-    for budget, scene in dict.fromkeys((r["budget"], r["scene"]) for r in rows):
+    for df, budget, scene in dict.fromkeys(
+            (r["defocus_waves"], r["budget"], r["scene"]) for r in rows):
+        key = {"defocus_waves": df, "budget": budget, "scene": scene}
         for series in ("rl", "default"):
             ssim = {}
             for r in rows:
-                if r["budget"] == budget and r["scene"] == scene and r["solver"] == (
-                        "rl" if series == "rl" or r["scan"] == 1 else "hqs"):
+                if (r["defocus_waves"], r["budget"], r["scene"]) == (df, budget, scene) and \
+                        r["solver"] == ("rl" if series == "rl" or r["scan"] == 1 else "hqs"):
                     ssim[r["scan"]] = r["ssim"]
             if all(p in ssim for p in (1, 3, 5)):
-                out.append({"summary": "SSIM(1x1) < SSIM(3x3) < SSIM(5x5)", "budget": budget,
-                            "scene": scene, "series": series,
-                            "holds": bool(ssim[1] < ssim[3] < ssim[5])})
+                out.append({"summary": "SSIM(1x1) < SSIM(3x3) < SSIM(5x5)", **key,
+                            "series": series, "holds": bool(ssim[1] < ssim[3] < ssim[5])})
             if 5 in ssim and 15 in ssim:
                 gain = ssim[15] - ssim[5]
-                out.append({"summary": "SSIM(15x15) - SSIM(5x5) < 0.02", "budget": budget,
-                            "scene": scene, "series": series, "value": gain,
-                            "holds": bool(gain < 0.02)})
+                out.append({"summary": "SSIM(15x15) - SSIM(5x5) < 0.02", **key,
+                            "series": series, "value": gain, "holds": bool(gain < 0.02)})
     return out
 
 
 def _plot(rows: list[dict], path: Path) -> None:
+    """SSIM against scan period, one panel per focus position."""
     from metasensor.io.figures import new_figure, save_figure
 
-    fig, axes = new_figure(size=(5, 3.6))
-    ax = axes[0, 0]
-    keys = dict.fromkeys((r["budget"], r["scene"], r.get("solver", "rl")) for r in rows)
-    for budget, scene, solver in keys:
-        sel = [r for r in rows if r["scene"] == scene and r["budget"] == budget
-               and r.get("solver", "rl") == solver]
-        ax.plot([r["scan"] for r in sel], [r["ssim"] for r in sel],
-                {"per-frame": "o", "equal-light": "s"}.get(budget, "^")
-                + ("-" if solver == "rl" else ":"),
-                label=f"{scene}, {budget}, {solver}")
-    ax.set_xscale("log")
-    ax.set_xticks(PERIODS, [f"{p}x{p}" for p in PERIODS])
-    ax.set_xlabel("scan period")
-    ax.set_ylabel("SSIM to truth")
-    ax.set_title("ISA vs scan period (30 dB per frame, equal light, noise-free)", fontsize=9)
-    ax.legend(fontsize=6)
+    focus = list(dict.fromkeys(r["defocus_waves"] for r in rows))
+    fig, axes = new_figure(1, len(focus), size=(5 * len(focus), 3.6))
+    for ax, df in zip(axes[0], focus, strict=True):
+        mine = [r for r in rows if r["defocus_waves"] == df]
+        for budget, scene, solver in dict.fromkeys(
+                (r["budget"], r["scene"], r["solver"]) for r in mine):
+            sel = [r for r in mine if (r["budget"], r["scene"], r["solver"]) == (budget, scene,
+                                                                               solver)]
+            ax.plot([r["scan"] for r in sel], [r["ssim"] for r in sel],
+                    {"per-frame": "o", "equal-light": "s"}.get(budget, "^")
+                    + ("-" if solver == "rl" else ":"), label=f"{scene}, {budget}, {solver}")
+        ax.set_xscale("log")
+        ax.set_xticks(PERIODS, [f"{p}x{p}" for p in PERIODS])
+        ax.set_xlabel("scan period")
+        ax.set_ylabel("SSIM to truth")
+        where = "on the MLA's conjugate plane" if df == 0 else f"defocus Z4 = {df:g} λ"
+        ax.set_title(f"ISA vs scan period, {where}", fontsize=9)
+        ax.legend(fontsize=6)
     save_figure(fig, path, dpi=120)
 
 
