@@ -40,7 +40,7 @@ def test_simulate_parameters(kw, match):
 
 
 @pytest.mark.parametrize("kw, match", [({"lam": -1.0}, "lam"), ({"tol": float("nan")}, "tol"),
-                                       ({"chunk": 0}, "chunk")])
+                                       ({"tol": -0.1}, "tol"), ({"chunk": 0}, "chunk")])
 def test_dao_parameters(kw, match):
     cfg = ms.SystemConfig()
     with pytest.raises(ValueError, match=match):

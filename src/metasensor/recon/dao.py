@@ -38,8 +38,8 @@ Alternate, starting from φ = ``init`` (or 0):
    1.92 λ residual before and 0.61 λ after (``benchmarks/bench_ed_fig4.py`` has all draws).
 4. every ``inner`` (3) iterations, fit the shifts by Zernike modes 4–45 plus a common offset
    (:mod:`metasensor.recon.wavefront`), add the fit to φ, regenerate the PSFs and restart the
-   shifts from 0. Stop when the r.m.s. of the update is below ``tol`` (0.1 λ) or after
-   ``max_iter`` updates.
+   shifts from 0. Stop when the r.m.s. of the update is below ``tol`` (0.1 λ; 0 runs all) or
+   after ``max_iter`` updates.
 
    Not in the paper (added here): the fit weights every view by the precision of its shift
    (:func:`metasensor.recon.shifts.shift_precision`: the inverse variance of the shift under
@@ -233,9 +233,11 @@ def run_dao(block_views, cfg: SystemConfig, method: str = "wave", init=None, dev
         raise ValueError(f"isa_below must be a non-negative number of waves, got {isa_below!r}")
     if max_iter < 1 or inner < 1:
         raise ValueError(f"max_iter and inner must be >= 1, got {max_iter}, {inner}")
-    for name, value in (("lam", lam), ("tol", tol), ("max_shift_px", max_shift_px)):
+    for name, value in (("lam", lam), ("max_shift_px", max_shift_px)):
         if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
             raise ValueError(f"{name} must be a positive number, got {value!r}")
+    if not (isinstance(tol, int | float) and math.isfinite(tol) and tol >= 0):  # 0: all updates
+        raise ValueError(f"tol must be a non-negative number of waves, got {tol!r}")
     if not (isinstance(chunk, int | np.integer) and chunk >= 1):
         raise ValueError(f"chunk must be a positive integer, got {chunk!r}")
     if np.iscomplexobj(v):
