@@ -93,7 +93,10 @@ def coarse_fine_widefield(original):
     return fine_widefield
 
 
-def one_case(scene_name: str, rms: float, draw: int, size: int, max_iter: int) -> list[dict]:
+def one_case(scene_name: str, rms: float, draw: int, size: int, max_iter: int,
+             snr_db: float = 30.0, methods=("geometric", "wave")) -> list[dict]:
+    """One capture (``snr_db``, aberration ``rms`` draw ``draw``) and its rows: 2D sensor,
+    hardware AO, the oracle ISA and DAO by each of ``methods``."""
     import metasensor as ms
     from metasensor.metrics import psnr, ssim
     from metasensor.optics.zernike import random_zernike
@@ -104,14 +107,14 @@ def one_case(scene_name: str, rms: float, draw: int, size: int, max_iter: int) -
     cfg = ms.SystemConfig()
     z = random_zernike(rms, seed=draw)
     scene = load_scene(scene_name, size)
-    cap = ms.simulate(scene, cfg, zernike=z, snr_db=30, seed=draw, psf=sim_bank)
+    cap = ms.simulate(scene, cfg, zernike=z, snr_db=snr_db, seed=draw, psf=sim_bank)
     k_sim = min(psf_window(cfg, z) + 2 * SIM_EXTRA, SIM_MAX)
     truth = cap.truth
     rng_ = float(truth.max() - truth.min())
     rows = []
 
     def add(mode, image, extra=None, seconds=None):
-        row = {"scene": scene_name, "rms": rms, "draw": draw, "mode": mode,
+        row = {"scene": scene_name, "rms": rms, "draw": draw, "snr_db": snr_db, "mode": mode,
                "psnr": psnr(image, truth, rng_), "ssim": ssim(image, truth, rng_)}
         if seconds is not None:
             row["seconds"] = seconds
@@ -125,13 +128,15 @@ def one_case(scene_name: str, rms: float, draw: int, size: int, max_iter: int) -
     oracle = ms.reconstruct(cap.views, cfg, method="isa", psf=ms.view_psfs(cfg, z, size=k_true),
                             solver="rl")
     add("oracle_isa", oracle.image, {"psf_size": k_true}, seconds=time.perf_counter() - t0)
-    for method in ("geometric", "wave"):
+    for method in methods:
         t0 = time.perf_counter()
         res = run_dao(cap.views, cfg, method=method, max_iter=max_iter)
         bank = block_psfs(cfg, res)
         rec = ms.reconstruct(cap.views, cfg, method="isa", psf=bank, solver="rl")
         resid = zernike_rms(res.zernike - z)
-        add(f"{method}_dao", rec.image, {"residual_rms": resid, "sigma": resid / _pv(z),
+        pv = _pv(z)
+        add(f"{method}_dao", rec.image, {"residual_rms": resid,
+                                         "sigma": resid / pv if pv > 0 else None,
                                          "dao_updates": len(res.history),
                                          "history": [round(h, 4) for h in res.history],
                                          "psf_size": int(bank.shape[-1])},
