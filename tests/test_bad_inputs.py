@@ -47,6 +47,13 @@ def test_dao_parameters(kw, match):
         run_dao(np.ones((15, 15, 20, 20), np.float32), cfg, **kw)
 
 
+def test_dao_tol_zero_runs_every_update():
+    # tol = 0 means "never stop early" (the slow 3 λ acceptance test runs that way); the
+    # parameter audit once refused it, which only the slow suite noticed
+    res = run_dao(np.ones((15, 15, 20, 20), np.float32), ms.SystemConfig(), tol=0.0, max_iter=1)
+    assert len(res.history) == 1
+
+
 def test_reconstruct_needs_a_few_samples():
     with pytest.raises(ValueError, match="too small"):
         ms.reconstruct(np.ones((15, 15, 1, 1), np.float32), ms.SystemConfig())
