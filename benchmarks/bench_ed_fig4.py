@@ -32,6 +32,7 @@ from __future__ import annotations
 import os
 import sys
 import time
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -93,10 +94,24 @@ def coarse_fine_widefield(original):
     return fine_widefield
 
 
+@contextmanager
+def coarse_widefield():
+    """The simulator's ``fine_widefield`` wrapped by :func:`coarse_fine_widefield` while the
+    block runs (restored after it, also on an error)."""
+    from metasensor.simulation import kernels as kern
+
+    original = kern.fine_widefield
+    kern.fine_widefield = coarse_fine_widefield(original)
+    try:
+        yield
+    finally:
+        kern.fine_widefield = original
+
+
 def one_case(scene_name: str, rms: float, draw: int, size: int, max_iter: int,
              snr_db: float = 30.0, methods=("geometric", "wave")) -> list[dict]:
-    """One capture (``snr_db``, aberration ``rms`` draw ``draw``) and its rows: 2D sensor,
-    hardware AO, the oracle ISA and DAO by each of ``methods``."""
+    """One capture (``snr_db``, aberration ``rms`` draw ``draw``, ``size`` px) and its rows: 2D
+    sensor, hardware AO, the oracle ISA and DAO by each of ``methods``."""
     import metasensor as ms
     from metasensor.metrics import psnr, ssim
     from metasensor.optics.zernike import random_zernike
@@ -114,7 +129,8 @@ def one_case(scene_name: str, rms: float, draw: int, size: int, max_iter: int,
     rows = []
 
     def add(mode, image, extra=None, seconds=None):
-        row = {"scene": scene_name, "rms": rms, "draw": draw, "snr_db": snr_db, "mode": mode,
+        row = {"scene": scene_name, "rms": rms, "draw": draw, "size": size, "snr_db": snr_db,
+               "mode": mode,
                "psnr": psnr(image, truth, rng_), "ssim": ssim(image, truth, rng_)}
         if seconds is not None:
             row["seconds"] = seconds
@@ -223,8 +239,6 @@ def run(quick: bool = False) -> list[dict]:
     # (a run of ~45 min on 2 cores); delete the file to start afresh
     import json
 
-    from metasensor.simulation import kernels as kern
-
     done_file = HERE / "results" / ("ed_fig4_quick_cases.jsonl" if quick else
                                     "ed_fig4_cases.jsonl")
     done: dict = {}
@@ -232,23 +246,17 @@ def run(quick: bool = False) -> list[dict]:
         for line in done_file.read_text().splitlines():
             r = json.loads(line)
             done.setdefault((r["scene"], r["rms"], r["draw"], r["size"]), []).append(r)
-    original = kern.fine_widefield
-    kern.fine_widefield = coarse_fine_widefield(original)
-    try:
+    with coarse_widefield():
         for s, v, d in tqdm(cases, desc="ED Fig. 4"):
             px = BIG_BLOCK if (v >= 3 and not quick) else size
             if (s, v, d, px) in done:
                 rows += done[s, v, d, px]
                 continue
             new = one_case(s, v, d, px, (8 if v >= 3 else 3) if not quick else 2)
-            for r in new:
-                r["size"] = px
             done_file.parent.mkdir(parents=True, exist_ok=True)
             with done_file.open("a") as f:
                 f.writelines(json.dumps(r) + "\n" for r in new)
             rows += new
-    finally:
-        kern.fine_widefield = original
     figure(rows, HERE / "results" / ("ed_fig4_quick.png" if quick else "ed_fig4.png"))
     return rows + summary(rows)
 

@@ -92,26 +92,18 @@ def run(quick: bool = False) -> list[dict]:
     from tqdm.auto import tqdm
 
     import bench_ed_fig4 as fig4
-    from metasensor.simulation import kernels as kern
 
     if quick:
         levels, snrs, size = (1.0,), (3.0, 30.0), 120
     else:
         levels, snrs, size = LEVELS, SNRS, 150
     rows: list[dict] = []
-    original = kern.fine_widefield
-    kern.fine_widefield = fig4.coarse_fine_widefield(original)
-    try:
+    with fig4.coarse_widefield():
         for v in tqdm(levels, desc="ED Fig. 5 levels"):
+            px = fig4.BIG_BLOCK if (v >= BIG_LEVEL and not quick) else size
             for snr in snrs:
-                px = fig4.BIG_BLOCK if (v >= BIG_LEVEL and not quick) else size
-                new = fig4.one_case("camera", v, 0, px, 3 if not quick else 2, snr_db=snr,
-                                    methods=("wave",))
-                for r in new:
-                    r["size"] = px
-                rows += new
-    finally:
-        kern.fine_widefield = original
+                rows += fig4.one_case("camera", v, 0, px, 3 if not quick else 2, snr_db=snr,
+                                      methods=("wave",))
     figure(rows, HERE / "results" / ("ed_fig5_quick.png" if quick else "ed_fig5.png"))
     return rows + summary(rows)
 
