@@ -172,10 +172,10 @@ def test_contract_and_metric_depth_round_trip():
     assert np.median(res.disparity[inner]) == pytest.approx(d_img / 3, abs=0.01)
     np.testing.assert_allclose(res.image_depth, res.disparity * 3 * cfg.mla_focal, rtol=1e-5)
     assert np.median(res.depth[inner]) == pytest.approx(s_obj, rel=0.03)
-    # without the main-lens geometry: image-side depth, no object distance
+    # without the main-lens geometry: image-side depth only; depth is None (the contract)
     res2 = ms.estimate_depth(sv.views, CFG, refine_iterations=0)
     assert res2.depth_kind == "image" and res2.object_distance is None
-    assert res2.depth is res2.image_depth
+    assert res2.depth is None and res2.image_depth.shape == (h, w)
     # confident where textured: the textured plane scores higher than a flat field
     flat = np.ones_like(sv.views) + 0.001 * np.random.default_rng(0).standard_normal(
         sv.views.shape).astype(np.float32)

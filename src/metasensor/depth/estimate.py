@@ -58,8 +58,9 @@ class DepthResult:
         focused in front of the MLA, towards the main lens; d = nnum // scan).
     object_distance : float32 metres from the main lens (thin lens), or ``None`` without
         ``focal_length`` and ``focus_distance``; NaN where no real object maps there.
-    depth : the metric depth: ``object_distance`` when the main-lens geometry is known, else
-        ``image_depth``; ``depth_kind`` says which (``"object"`` or ``"image"``).
+    depth : the metric depth of the contract (issue 8): ``object_distance`` when the main-lens
+        geometry is known, else ``None`` (``image_depth`` is there either way);
+        ``depth_kind`` says which metric maps exist (``"object"`` or ``"image"`` only).
     candidates : the candidate disparities of the plane sweep (view px per view step).
     """
 
@@ -67,7 +68,7 @@ class DepthResult:
     confidence: np.ndarray
     image_depth: np.ndarray
     object_distance: np.ndarray | None
-    depth: np.ndarray
+    depth: np.ndarray | None
     depth_kind: str
     candidates: np.ndarray
     config: SystemConfig
@@ -185,6 +186,6 @@ def estimate_depth(views, cfg: SystemConfig, calibration=None, *, candidates: in
         obj = geometry.image_depth_to_object_distance(z, *lens).astype(np.float32)
     return DepthResult(
         disparity=disparity, confidence=confidence, image_depth=z, object_distance=obj,
-        depth=obj if obj is not None else z, depth_kind="object" if obj is not None else "image",
+        depth=obj, depth_kind="object" if obj is not None else "image",
         candidates=cands, config=cfg,
     )

@@ -52,12 +52,14 @@ def register(app: typer.Typer) -> None:
                                              "(repeat the option for several)."),
         pixel_pitch: float | None = typer.Option(None, "--pixel-pitch",
                                                  help="Pixel pitch in metres (adds lp/mm)."),
-        out: Path = typer.Option(..., "--out", help="Output folder."),
+        out: Path | None = typer.Option(None, "--out", help="Output folder (default: "
+                                        "RESULT's folder / <RESULT stem>_evaluation)."),
     ) -> None:
         """PSNR, SSIM and slanted-edge MTF (ISO 12233) of a result image.
 
         Writes evaluation.json, evaluation.csv (one row per MTF ROI), evaluation.txt and figures
-        (mtf_curves.png, mtf50_field.png, images.png, difference.png) into --out.
+        (mtf_curves.png, mtf50_field.png, images.png, difference.png) into --out (default:
+        a folder <result stem>_evaluation beside the result).
 
         Example: metasensor evaluate result/image.tif --truth cap/truth.tif --chart --out eval/
         """
@@ -68,6 +70,8 @@ def register(app: typer.Typer) -> None:
         rois = [parse_roi(r) for r in roi] if roi else None
         res, fm = evaluate_full(img, ref, chart=chart, rois=rois, pixel_pitch=pixel_pitch,
                                 progress=True)
+        if out is None:
+            out = result.parent / f"{result.stem}_evaluation"
         res["inputs"] = {"result": str(result), "truth": None if truth is None else str(truth)}
         written = write_evaluation(out, res, fm, image=img, truth=ref)
         typer.echo((out / "evaluation.txt").read_text().rstrip())
