@@ -90,3 +90,78 @@ def test_calibration_values(change, match):
     Calibration(**base)  # the valid one
     with pytest.raises(ValueError, match=match):
         Calibration(**{**base, **change})
+
+
+# --- a second audit (550 bad-input cases on the CLI and the API): the cases it found ---
+
+def test_api_names_the_bad_argument():
+    frames = np.zeros((25, 60, 60), np.uint16)
+    with pytest.raises(TypeError, match="cfg must be a SystemConfig"):
+        ms.realign(frames, None)
+    with pytest.raises(TypeError, match="cfg must be a SystemConfig"):
+        ms.view_psfs(None)
+    with pytest.raises(TypeError, match="cfg must be a SystemConfig"):
+        ms.widefield_psf(None)
+    with pytest.raises(TypeError, match="zernike"):
+        ms.view_psfs(ms.SystemConfig(), zernike="abc")
+    with pytest.raises(TypeError, match="dtype"):
+        ms.realign(frames, ms.SystemConfig(), dtype="bogus")
+
+
+@pytest.mark.parametrize("kw, err, match", [({"seed": -1}, ValueError, "seed"),
+                                            ({"seed": "x"}, ValueError, "seed"),
+                                            ({"snr_db": "30"}, TypeError, "snr_db"),
+                                            ({"psf": np.ones((3, 3, 5, 5))}, TypeError, "psf")])
+def test_simulate_run_options(kw, err, match):
+    with pytest.raises(err, match=match):
+        ms.simulate(load_scene("chart", 96), ms.SystemConfig(), comparison=False, **kw)
+
+
+@pytest.mark.parametrize("kw, match", [({"iterations": 2.5}, "iterations"),
+                                       ({"num_workers": 0}, "num_workers"),
+                                       ({"subsets": 1000}, "subsets")])
+def test_reconstruct_counts(kw, match):
+    with pytest.raises(ValueError, match=match):
+        ms.reconstruct(np.ones((15, 15, 8, 8), np.float32), ms.SystemConfig(), **kw)
+
+
+def test_depth_upper_bounds():
+    v = np.random.default_rng(0).random((5, 5, 20, 20)).astype(np.float32)
+    with pytest.raises(ValueError, match="candidates"):  # a 10^7-plane cost volume: 25 GB
+        ms.estimate_depth(v, CFG5, candidates=10_000_000)
+    with pytest.raises(ValueError, match="radius"):
+        ms.estimate_depth(v, CFG5, radius=100_000)
+
+
+def test_motion_inputs():
+    view = np.ones((60, 60), np.float32)
+    with pytest.raises(TypeError, match="real numbers"):
+        ms.correct_motion(view.astype(np.complex64), None)
+    with pytest.raises(ValueError, match="max_ratio"):
+        ms.correct_motion(view, None, max_ratio=-1)
+    with pytest.raises(TypeError, match="scan_order"):
+        ms.correct_motion(view, 5)
+
+
+def test_config_file_empty_or_binary(tmp_path):
+    from metasensor.config import ConfigError
+
+    empty, binary = tmp_path / "empty.toml", tmp_path / "binary.toml"
+    empty.write_text("  \n")
+    binary.write_bytes(b"\xff\xfe\x00junk")
+    with pytest.raises(ConfigError, match="empty.toml is empty"):
+        ms.SystemConfig.from_toml(empty)
+    with pytest.raises(ConfigError, match="binary.toml is not a TOML text file"):
+        ms.SystemConfig.from_toml(binary)
+
+
+def test_atomic_write_names_the_target_not_a_temporary(tmp_path):
+    from metasensor.io.atomic import atomic_write_text
+
+    (tmp_path / "folder").mkdir()
+    with pytest.raises(OSError, match=r"cannot write .*folder: it is a folder"):
+        atomic_write_text(tmp_path / "folder", "x")
+    (tmp_path / "file").write_text("x")
+    with pytest.raises(OSError, match=r"cannot write .*file[/\\]out.txt"):
+        atomic_write_text(tmp_path / "file" / "out.txt", "x")  # parent is a file
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["file", "folder"]  # no temporaries

@@ -81,3 +81,35 @@ def test_snr_search_keeps_the_best_gain_it_found():
     clean = np.random.default_rng(0).random((64, 64)).astype(np.float32)
     noisy, _ = add_noise(clean, 0.0, None, 0.0, 12, 2)
     assert abs(measure_snr(clean, noisy)) <= 0.5
+
+
+def test_out_of_the_wrong_kind_and_bad_numbers_are_one_line(tmp_path):
+    # a second audit: these failed deep inside (a raw [Errno 17], numpy's seed wording, click's
+    # "aborted" for an empty .npy) or were accepted (--reference -5)
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    src = str(Path(__file__).resolve().parents[1] / "src")
+    afile = tmp_path / "afile"
+    afile.write_text("x")
+    (tmp_path / "empty.npy").write_bytes(b"")
+    (tmp_path / "adir").mkdir()
+    from metasensor.io.views import write_views
+
+    views = write_views(tmp_path / "v.tif", np.ones((15, 15, 60, 60), np.float32),
+                        ms.SystemConfig())
+    cases = [(["simulate", "--size", "96", "--out", afile], "'--out'"),
+             (["psf", "--config", "x.toml", "--out", tmp_path / "adir"], "'--out'"),
+             (["simulate", "--size", "96", "--seed", "-1", "--out", tmp_path / "s"], "seed"),
+             (["motion", views, "--reference", "-5", "--out", tmp_path / "m.tif"],
+              "--reference"),
+             (["reconstruct", views, "--field-zernike", tmp_path / "empty.npy", "--out",
+               tmp_path / "r"], "not a readable .npy")]
+    for args, msg in cases:
+        p = subprocess.run([sys.executable, "-m", "metasensor.cli", *map(str, args)],
+                           capture_output=True, text=True, cwd=tmp_path,
+                           env={"PYTHONPATH": src, "PATH": "", "METASENSOR_CACHE": str(tmp_path)})
+        assert p.returncode == 2, (args, p.stderr)
+        lines = p.stderr.strip().splitlines()
+        assert len(lines) == 1 and msg in lines[0], (args, p.stderr)

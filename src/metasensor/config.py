@@ -294,7 +294,16 @@ class SystemConfig:
         path = Path(path)
         if not path.is_file():
             raise ConfigError(f"config file not found: {path}")
-        return cls.from_toml_string(path.read_text())
+        try:
+            text = path.read_bytes().decode("utf-8")
+        except UnicodeDecodeError:
+            raise ConfigError(f"config {path} is not a TOML text file (not UTF-8)") from None
+        if not text.strip():
+            raise ConfigError(f"config {path} is empty (a [system] table of parameters expected)")
+        try:
+            return cls.from_toml_string(text)
+        except ConfigError as exc:
+            raise ConfigError(f"config {path}: {exc}") from None
 
     def digest(self) -> str:
         """Stable hash of every parameter (for cache keys)."""

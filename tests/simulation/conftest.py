@@ -39,6 +39,9 @@ REAL = _real_optics()
 def _install(monkeypatch):
     import fake_optics
 
+    if REAL:  # resolve metasensor's lazy names now: resolved under the stand-in modules below,
+        _ = ms.view_psfs, ms.widefield_psf  # monkeypatch would "restore" the stand-ins
+
     psf = types.ModuleType("metasensor.optics.psf")
     psf.view_psfs = fake_optics.view_psfs
     psf.widefield_psf = fake_optics.widefield_psf

@@ -93,7 +93,7 @@ def register(app: typer.Typer) -> None:
     @app.command("depth")
     def depth(
         views: Path = typer.Argument(..., help="view stack (.tif pages u*nnum+v, or .zarr)"),
-        out: Path = typer.Option(..., "--out", "-o", help="output folder"),
+        out: Path = typer.Option(..., "--out", "-o", file_okay=False, help="output folder"),
         system: Path | None = typer.Option(None, "--system",
                                            help="system-aberration calibration (system.h5)"),
         config: Path | None = typer.Option(None, "--config",

@@ -47,6 +47,9 @@ from metasensor.depth.refine import (
 __all__ = ["DepthResult", "estimate_depth"]
 
 
+MAX_CANDIDATES = 1024  # plane-sweep disparities, at most
+
+
 @dataclass(frozen=True)
 class DepthResult:
     """Result of :func:`estimate_depth`; every map is ``(H, W)`` on the view grid.
@@ -117,10 +120,15 @@ def estimate_depth(views, cfg: SystemConfig, calibration=None, *, candidates: in
         raise TypeError(f"cfg must be a SystemConfig, got {type(cfg).__name__}")
     arr = _check_views(views, cfg)
     n, c = cfg.nnum, cfg.center
-    for name, value, low in (("radius", radius, 1), ("refine_iterations", refine_iterations, 0),
-                             ("fill_radius", fill_radius, 1), ("candidates", candidates, 2)):
-        if not (isinstance(value, int | np.integer) and value >= low):
-            raise ValueError(f"{name} must be an integer >= {low}, got {value!r}")
+    side = max(arr.shape[2:])
+    # upper bounds: windows beyond the view, and sweeps finer than 1/1000 of the range (a cost
+    # volume of candidates x H x W floats) are mistakes, not settings
+    for name, value, low, high in (("radius", radius, 1, side),
+                                   ("refine_iterations", refine_iterations, 0, 100),
+                                   ("fill_radius", fill_radius, 1, side),
+                                   ("candidates", candidates, 2, MAX_CANDIDATES)):
+        if not (isinstance(value, int | np.integer) and low <= value <= high):
+            raise ValueError(f"{name} must be an integer in [{low}, {high}], got {value!r}")
     if not (isinstance(eps, int | float) and math.isfinite(eps) and eps > 0):
         raise ValueError(f"eps must be a positive number, got {eps!r}")
     if disparity_range is not None and (np.shape(disparity_range) != (2,)

@@ -85,6 +85,18 @@ def _write_zarr(path: Path, views: np.ndarray, meta: dict) -> Path:
     return path
 
 
+def _open_zarr(path: Path):
+    """The array of a Zarr view store, read-only; one ``ValueError`` line if there is none."""
+    import zarr
+
+    try:
+        return zarr.open_array(str(path), mode="r")
+    except Exception as exc:  # noqa: BLE001 - zarr raises several kinds for a store without one
+        raise ValueError(f"{path}: not a Zarr view stack (no readable array: "
+                         f"{str(exc).strip().splitlines()[0] if str(exc).strip() else exc!r})"
+                         ) from None
+
+
 def read_views(path: str | Path, nnum: int | None = None, mmap: bool = False) -> np.ndarray:
     """Read a view stack written by :func:`write_views` (or any ``nnum²``-page TIFF).
 
@@ -97,9 +109,7 @@ def read_views(path: str | Path, nnum: int | None = None, mmap: bool = False) ->
     if not path.exists():
         raise FileNotFoundError(f"view stack not found: {path}")
     if path.suffix.lower() == ".zarr":
-        import zarr
-
-        arr = zarr.open_array(str(path), mode="r")
+        arr = _open_zarr(path)
         if arr.ndim != 4:
             raise ValueError(f"{path}: expected a 4-D (nnum, nnum, H, W) array, got {arr.shape}")
         return arr
@@ -124,9 +134,7 @@ def _stored_meta(path: Path) -> dict | None:
     import tifffile
 
     if path.suffix.lower() == ".zarr":
-        import zarr
-
-        meta = dict(zarr.open_array(str(path), mode="r").attrs)
+        meta = dict(_open_zarr(path).attrs)
     else:
         warned = TiffWarnings()  # tifffile's logged warnings: kept off stderr, named here
         try:  # page 0 only (the rest of the chain is read_views' to check)

@@ -52,7 +52,8 @@ def register(app: typer.Typer) -> None:
                                              "(repeat the option for several)."),
         pixel_pitch: float | None = typer.Option(None, "--pixel-pitch",
                                                  help="Pixel pitch in metres (adds lp/mm)."),
-        out: Path | None = typer.Option(None, "--out", help="Output folder (default: "
+        out: Path | None = typer.Option(None, "--out", file_okay=False,
+                                        help="Output folder (default: "
                                         "RESULT's folder / <RESULT stem>_evaluation)."),
     ) -> None:
         """PSNR, SSIM and slanted-edge MTF (ISO 12233) of a result image.

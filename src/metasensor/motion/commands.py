@@ -113,7 +113,10 @@ def register(app: typer.Typer) -> None:
             if not (0 <= u < stack.shape[0] and 0 <= v < stack.shape[1]):
                 raise ValueError(f"--flow-view {flow_view} is outside the {stack.shape[0]}² views")
             fv = (u, v)
-        ref = None if reference < 0 else reference
+        if reference < -1:
+            raise ValueError(f"--reference must be a scan-order index >= 0, or -1 for the "
+                             f"middle one, got {reference}")
+        ref = None if reference == -1 else reference
         result = correct_motion_views(stack, order, reference=ref, flow_view=fv, mode=mode,
                                       method=method, scatter=scatter)
         extra = {k: v for k, v in stored.items() if k not in ("kind", "view_shape")}

@@ -62,7 +62,8 @@ def _resolve(scan_order, reference, shape) -> tuple[list[tuple[int, int]], int, 
     return order, p, int(ref)
 
 
-def _check_options(scatter: str, threshold: float, smooth: float, method: str) -> None:
+def _check_options(scatter: str, threshold: float, smooth: float, method: str,
+                   max_ratio: float = 0.5) -> None:
     """One-line errors for impossible options, before any flow is computed."""
     if scatter not in ("linear", "cubic"):
         raise ValueError(f"scatter must be 'linear' or 'cubic', got {scatter!r}")
@@ -71,10 +72,14 @@ def _check_options(scatter: str, threshold: float, smooth: float, method: str) -
     for name, value in (("threshold", threshold), ("smooth", smooth)):
         if not (isinstance(value, int | float) and math.isfinite(value) and value >= 0):
             raise ValueError(f"{name} must be a non-negative number, got {value!r}")
+    if not (isinstance(max_ratio, int | float) and 0 < max_ratio <= 1):
+        raise ValueError(f"max_ratio must lie in (0, 1] (1 disables the test), got {max_ratio!r}")
 
 
 def _check_image(img, name: str) -> np.ndarray:
     img = np.asarray(img)
+    if np.iscomplexobj(img) or not np.issubdtype(img.dtype, np.number):
+        raise TypeError(f"{name} must hold real numbers, got dtype {img.dtype}")
     if img.ndim != 2:
         raise ValueError(f"{name} must be a 2-D (H, W) view, got shape {img.shape}")
     if not np.all(np.isfinite(img)):
@@ -216,7 +221,7 @@ def correct_motion(view_image: np.ndarray, scan_order: Sequence | str | None,
     (skips the flow). Returns ``(H, W)`` float32; static regions are returned unchanged.
     """
     view = _check_image(view_image, "view_image")
-    _check_options(scatter, threshold, smooth, method)
+    _check_options(scatter, threshold, smooth, method, max_ratio)
     order, p, ref = _resolve(scan_order, reference, view.shape)
     if motion is None:
         motion = estimate_motion(view, order, ref, method=method, threshold=threshold,
@@ -253,6 +258,8 @@ def correct_motion_views(views: np.ndarray, scan_order: Sequence, reference: int
     views = np.asarray(views)
     if views.ndim != 4 or views.shape[0] != views.shape[1]:
         raise ValueError(f"views must have shape (nnum, nnum, H, W), got {views.shape}")
+    if np.iscomplexobj(views) or not np.issubdtype(views.dtype, np.number):
+        raise TypeError(f"views must hold real numbers, got dtype {views.dtype}")
     if not np.all(np.isfinite(views)):
         raise ValueError("views contain NaN or infinite values")
     n, _, h, w = views.shape

@@ -13,7 +13,7 @@ def register(app: typer.Typer) -> None:
     @app.command("psf")
     def psf_command(
         config: Path = typer.Option(..., "--config", help="system configuration (TOML)"),
-        out: Path = typer.Option(..., "--out",
+        out: Path = typer.Option(..., "--out", dir_okay=False,
                                  help="output HDF5 file (dataset 'psf', axes u, v, y, x)"),
         zernike: str = typer.Option("", "--zernike",
                                     help="Noll index:waves pairs, e.g. '4:0.5,7:-0.2', or a .npy "
@@ -21,7 +21,8 @@ def register(app: typer.Typer) -> None:
         depth: float = typer.Option(0.0, "--depth", help="defocus on the image side, metres"),
         subsample: int = typer.Option(1, "--subsample", help="point positions per pixel (1, 3)"),
         size: int = typer.Option(0, "--size", help="PSF window K in pixels (odd; 0 = auto)"),
-        png: Path = typer.Option(None, "--png", help="figure path (default: OUT with .png)"),
+        png: Path = typer.Option(None, "--png", dir_okay=False,
+                                 help="figure path (default: OUT with .png)"),
         device: str = typer.Option(None, "--device", help="torch device (default: auto)"),
     ) -> None:
         """Compute the phase-space PSF bank of every view and write it to HDF5 plus a figure.

@@ -61,10 +61,19 @@ PupilFn = Callable[[np.ndarray, np.ndarray], np.ndarray]
 
 
 # ----------------------------------------------------------------------------- checks
+def _check_config(cfg) -> None:
+    if not isinstance(cfg, SystemConfig):
+        raise TypeError(f"cfg must be a SystemConfig, got {type(cfg).__name__}")
+
+
 def _check_zernike(zernike) -> np.ndarray | None:
     if zernike is None:
         return None
-    z = np.asarray(zernike, dtype=np.float64)
+    try:
+        z = np.asarray(zernike, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise TypeError(f"zernike must be a 1-D Noll vector of numbers (waves), got "
+                        f"{zernike!r:.60}") from None
     if z.ndim != 1 or z.size == 0:
         raise ValueError(f"zernike must be a 1-D Noll coefficient vector, got shape {z.shape}")
     if not np.isfinite(z).all():
@@ -211,6 +220,7 @@ def view_psfs(cfg: SystemConfig, zernike=None, depth: float = 0.0, *,
         and oversample.
     oversample : simulation samples per pixel per axis (odd multiple of subsample; default >= 3).
     """
+    _check_config(cfg)
     z = _check_zernike(zernike)
     depth = _check_depth(depth)
     sub = _check_odd(subsample, "subsample")
@@ -362,6 +372,7 @@ def widefield_psf(cfg: SystemConfig, zernike=None, depth: float = 0.0, sampling=
     fraction of light on the K×K window (≈ 1 for the clear pupil). Same pupil arguments as
     :func:`view_psfs`. ``size`` None: smallest odd K keeping >= 99.5 % of the energy.
     """
+    _check_config(cfg)
     z = _check_zernike(zernike)
     depth = _check_depth(depth)
     size = _check_odd(size, "size")

@@ -29,8 +29,9 @@ def parse_zernike(text: str | None) -> np.ndarray | None:
             raise FileNotFoundError(f"--zernike file not found: {path}")
         try:
             z = np.load(path, allow_pickle=False)
-        except (OSError, ValueError) as exc:
-            raise ValueError(f"--zernike {path}: not a readable .npy file ({exc})") from None
+        except (OSError, ValueError, EOFError) as exc:  # EOFError: an empty file
+            raise ValueError(f"--zernike {path}: not a readable .npy file "
+                             f"({exc or 'empty'})") from None
         if z.ndim != 1 or z.size == 0 or not np.isfinite(z).all():
             raise ValueError(f"--zernike {path}: expected a finite 1-D Noll vector, got shape "
                              f"{z.shape}")

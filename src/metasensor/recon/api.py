@@ -295,9 +295,13 @@ def reconstruct(views, cfg: SystemConfig, method: str = "isa", zernike=None, fie
     if solver is None:
         rl_asked = iterations is not None or subsets is not None
         solver = "rl" if rl_asked or d > HQS_MAX_STEP else "hqs"
+    for name, value in (("iterations", iterations), ("subsets", subsets),
+                        ("num_workers", num_workers)):
+        if value is not None and (isinstance(value, bool) or not isinstance(value, int | np.integer)
+                                  or value < (0 if name == "iterations" else 1)):
+            low = 0 if name == "iterations" else 1
+            raise ValueError(f"{name} must be an integer >= {low} (or None), got {value!r}")
     iterations = DEFAULT_ITERATIONS if iterations is None else int(iterations)
-    if iterations < 0:
-        raise ValueError(f"iterations must be >= 0, got {iterations}")
     if solver not in _SOLVERS:
         raise ValueError(f"solver must be one of {_SOLVERS}, got {solver!r}")
     if solver == "hqs" and d > HQS_MAX_STEP:
@@ -327,9 +331,9 @@ def reconstruct(views, cfg: SystemConfig, method: str = "isa", zernike=None, fie
     block_list = split_blocks(shape, (by, bx), d, overlap=overlap, margin=margin)
     zern = block_zernikes(block_list, shape, (by, bx), zernike, field_zernike)
     uv = view_order(cfg.view_mask(view_radius), order)
-    n_subsets = default_subsets(d) if subsets is None else int(subsets)
-    if n_subsets < 1:
-        raise ValueError(f"subsets must be >= 1, got {n_subsets}")
+    n_subsets = min(default_subsets(d), len(uv)) if subsets is None else int(subsets)
+    if n_subsets > len(uv):
+        raise ValueError(f"subsets must be at most the {len(uv)} views used, got {n_subsets}")
     uv = subset_major(uv, n_subsets)
     from metasensor.backend import resolve_device
 

@@ -71,7 +71,7 @@ def write_outputs(out: Path, rec, views, origin=None) -> list[Path]:
         y0, y1, x0, x1 = (e / f for e in b.core)
         axes[1].plot([x0, x1, x1, x0, x0], [y0, y0, y1, y1, y0], lw=0.4, color="tab:orange")
     with atomic_path(out / "reconstruction.png") as tmp:
-        fig.savefig(tmp, dpi=120)
+        fig.savefig(tmp, dpi=120, format="png")
     plt.close(fig)
     return [out / n for n in ("image.tif", "zernike.npy", "summary.json", "reconstruction.png")]
 
@@ -152,7 +152,7 @@ def register(app: typer.Typer) -> None:
     @app.command("reconstruct")
     def reconstruct_cmd(
         views: Path = typer.Argument(..., help="view stack (.tif pages u*nnum+v, or .zarr)"),
-        out: Path = typer.Option(..., "--out", help="output folder"),
+        out: Path = typer.Option(..., "--out", file_okay=False, help="output folder"),
         psf: Path | None = typer.Option(None, "--psf", help="PSF bank (HDF5, dataset 'psf')"),
         config: Path | None = typer.Option(None, "--config", help="system configuration TOML"),
         method: str = typer.Option("isa", "--method", "--dao",
@@ -236,7 +236,11 @@ def register(app: typer.Typer) -> None:
         if field_zernike is not None:
             if not field_zernike.is_file():
                 raise FileNotFoundError(f"field Zernike file not found: {field_zernike}")
-            fz = np.load(field_zernike)
+            try:
+                fz = np.load(field_zernike, allow_pickle=False)
+            except (OSError, ValueError, EOFError) as exc:  # EOFError: an empty file
+                raise ValueError(f"--field-zernike {field_zernike}: not a readable .npy file "
+                                 f"({exc or 'empty'})") from None
         if system is not None:
             if fz is not None:
                 raise ValueError("give either --system or --field-zernike, not both")

@@ -27,7 +27,8 @@ def register(app: typer.Typer) -> None:
     @app.command("calibrate-aberration")
     def calibrate_aberration(
         capture: Path = typer.Argument(..., help="view stack (TIFF/Zarr) of a textured target"),
-        out: Path = typer.Option(Path("system.h5"), "--out", help="calibration file (HDF5)"),
+        out: Path = typer.Option(Path("system.h5"), "--out", dir_okay=False,
+                                 help="calibration file (HDF5)"),
         config: Path | None = typer.Option(None, "--config",
                                            help="system TOML (default: the capture's metadata)"),
         blocks: str = typer.Option("4x4", help="blocks whose centres get a wavefront, e.g. 4x4"),

@@ -32,14 +32,16 @@ def _order(text: str | None, period: int):
 
 def calibrate_cmd(
     white: Path = typer.Argument(..., help="white (flat-field) or textured raw frame(s), TIFF"),
-    out: Path = typer.Option(..., "--out", help="calibration file to write (.toml)"),
+    out: Path = typer.Option(..., "--out", dir_okay=False,
+                             help="calibration file to write (.toml)"),
     config: Path | None = typer.Option(None, "--config", help="system configuration TOML"),
     scan: int | None = typer.Option(None, "--scan", help="scan period of a multi-page input"),
     order: str | None = typer.Option(None, "--order", help=f"scan order: {_ORDERS}"),
     moving: str = typer.Option("mla", "--moving", help="what moves during the scan: mla|image"),
     flat: bool = typer.Option(True, "--flat/--no-flat", help="also write the flat-field map"),
-    figure: Path | None = typer.Option(None, "--figure", help="PNG: fitted grid over the frame, "
-                                       "offsets against nominal"),
+    figure: Path | None = typer.Option(None, "--figure", dir_okay=False,
+                                       help="PNG: fitted grid over the frame, offsets against "
+                                       "nominal"),
 ) -> None:
     """Calibrate the lenslet grid (pitch, rotation, centre, flat field, scan offsets).
 
@@ -276,7 +278,7 @@ def _calibration_figure(frame: np.ndarray, calib, path: Path) -> None:
     axes[1].set_ylabel("phase row")
     fig.tight_layout()
     with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=100)
+        fig.savefig(tmp, dpi=100, format="png")
     plt.close(fig)
 
 

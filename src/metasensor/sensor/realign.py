@@ -26,6 +26,8 @@ _DTYPES = {np.dtype(t) for t in ("uint8", "uint16", "uint32", "int8", "int16", "
 
 
 def _geometry(cfg: SystemConfig, moving: str) -> tuple[int, int, int]:
+    if not isinstance(cfg, SystemConfig):
+        raise TypeError(f"cfg must be a SystemConfig, got {type(cfg).__name__}")
     if moving not in _MOVING:
         raise ValueError(f"moving must be 'mla' or 'image', got {moving!r}")
     p = cfg.scan
@@ -105,6 +107,11 @@ def realign(frames, cfg: SystemConfig, scan_order=None, moving: str = "mla", *,
     """
     p, _, margin = _geometry(cfg, moving)
     order = check_scan_order(scan_order, p)
+    if dtype is not None:
+        try:
+            np.dtype(dtype)
+        except TypeError:
+            raise TypeError(f"dtype must be a NumPy dtype or None, got {dtype!r}") from None
     if type(frames).__module__.startswith("torch"):
         views = _realign_torch(frames, cfg, order, moving, margin)
         if dtype is None:

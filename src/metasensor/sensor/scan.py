@@ -22,6 +22,8 @@ def scan_order(period: int, kind: str = "row-major") -> list[tuple[int, int]]:
 
 def period_of(order: Sequence[Sequence[int]]) -> int:
     """Scan period implied by an order: int(sqrt(len(order)))."""
+    if not hasattr(order, "__len__") or isinstance(order, str | bytes):
+        raise TypeError(f"scan_order must be a list of (row, col) pairs, got {order!r:.60}")
     p = math.isqrt(len(order))
     if p * p != len(order) or p == 0:
         raise ValueError(f"scan order has {len(order)} phases, not a square number")

@@ -150,6 +150,19 @@ def _accumulate(image: np.ndarray, comps, kernel_of, rows: Lattice, cols: Lattic
                      out=out)
 
 
+def _check_run_options(seed, snr_db, photons, psf) -> None:
+    """One-line errors for :func:`simulate`'s seed, noise target and PSF provider."""
+    if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
+        raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
+    for name, value in (("snr_db", snr_db), ("photons", photons)):
+        if value is not None and (isinstance(value, bool)
+                                  or not isinstance(value, int | float | np.number)):
+            raise TypeError(f"{name} must be a number or None, got {value!r}")
+    if psf is not None and not callable(psf):
+        raise TypeError("psf must be a callable psf(cfg, zernike, depth, phase=, device=) -> "
+                        f"(nnum, nnum, Kf, Kf) fine-grid bank, got {type(psf).__name__}")
+
+
 def simulate(scene, cfg: SystemConfig, zernike=None, field_zernike=None, depth=None, scan=None,
              scan_order=None, snr_db=None, motion: Motion | None = None,
              turbulence: Turbulence | None = None, seed: int = 0, *, photons=None,
@@ -213,8 +226,9 @@ def simulate(scene, cfg: SystemConfig, zernike=None, field_zernike=None, depth=N
         motion.check(shape)
     if turbulence is not None and not isinstance(turbulence, Turbulence):
         raise TypeError("turbulence must be a metasensor.simulation.Turbulence")
+    _check_run_options(seed, snr_db, photons, psf)
     dev = resolve_device(device)
-    seeds = np.random.SeedSequence(seed).spawn(4)
+    seeds = np.random.SeedSequence(int(seed)).spawn(4)
     options = dict(zernike=zernike, field_zernike=field_zernike, depth=depth, motion=motion,
                    turbulence=turbulence, seed=seed, read_noise=read_noise, bit_depth=bits,
                    exposure=exposure, sensor_shape=sensor_shape, field_blocks=field_blocks,

@@ -97,7 +97,7 @@ def capture_figure(cap, path: Path) -> Path:
     fig.suptitle(f"scan {cap.config.scan}x{cap.config.scan}, SNR {cap.snr_db:.1f} dB")
     fig.tight_layout(rect=(0, 0, 1, 0.94))
     with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=100)
+        fig.savefig(tmp, dpi=100, format="png")
     plt.close(fig)
     return path
 
@@ -107,7 +107,7 @@ def register(app: typer.Typer) -> None:
 
     @app.command("simulate")
     def simulate_cmd(
-        out: Path = typer.Option(..., "--out", help="output folder"),
+        out: Path = typer.Option(..., "--out", file_okay=False, help="output folder"),
         scene: str = typer.Option("chart", help="built-in scene name or an image file"),
         size: int = typer.Option(512, help="scene size in pixels (square)"),
         config: Path = typer.Option(None, help="system configuration TOML (default: prototype)"),
