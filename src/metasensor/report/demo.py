@@ -112,6 +112,7 @@ def run_demo(out: str | Path, settings: DemoSettings | None = None, progress: bo
     import metasensor as ms
     from metasensor.io.figures import save_panel
     from metasensor.metrics import psnr, ssim
+    from metasensor.recon.blocks import split_blocks
     from metasensor.report.html import write_html_report
     from metasensor.simulation.capture import simulate
     from metasensor.simulation.lens import SingleLens
@@ -123,6 +124,8 @@ def run_demo(out: str | Path, settings: DemoSettings | None = None, progress: bo
         raise ValueError(f"snr_db must be a finite number of dB, got {s.snr_db!r}")
     if min(s.blocks) < 1 or min(s.field_blocks) < 1:
         raise ValueError(f"blocks must be >= 1 each, got {s.blocks} / {s.field_blocks}")
+    d = SystemConfig(scan=s.scan).scan_step_px  # blocks too small even for the whole scene:
+    split_blocks((s.size // d * d,) * 2, s.blocks, d)  # fail before simulating
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     t_start = time.perf_counter()
