@@ -97,7 +97,7 @@ def register(app: typer.Typer) -> None:
 
             order = [tuple(q) for q in stored["scan_order"]]
             order = check_scan_order(order, p or period_of(order))
-            typer.echo(f"using the scan order stored in {Path(views).name}", err=True)
+            typer.echo(f"using the scan order stored in {Path(views).name}")
         else:
             order = parse_scan_order(scan_order or "row-major", p)
         if flow_view in ("centre", "center"):

@@ -234,7 +234,7 @@ def _stored_settings(raw_path: Path, config, scan, order, moving):
         if "moving" in extra:
             used.append("moving")
     if used:
-        typer.echo(f"using the {', '.join(used)} stored in {raw_path.name}", err=True)
+        typer.echo(f"using the {', '.join(used)} stored in {raw_path.name}")
     return cfg, phases, moving
 
 
