@@ -14,7 +14,16 @@ import numpy as np
 from metasensor.config import ConfigError, SystemConfig
 from metasensor.io.atomic import atomic_path
 
-__all__ = ["save_psf", "load_psf", "plot_views", "parse_zernike"]
+__all__ = ["save_psf", "load_psf", "plot_views", "parse_zernike", "read_npy"]
+
+
+def read_npy(path: str | Path, what: str) -> np.ndarray:
+    """A ``.npy`` array (no pickles); one ``ValueError`` line naming ``what`` and the file if it
+    is empty, truncated or not a NumPy file."""
+    try:
+        return np.load(path, allow_pickle=False)
+    except (OSError, ValueError, EOFError) as exc:  # EOFError: an empty file
+        raise ValueError(f"{what} {path}: not a readable .npy file ({exc or 'empty'})") from None
 
 
 def parse_zernike(text: str | None) -> np.ndarray | None:
@@ -27,11 +36,7 @@ def parse_zernike(text: str | None) -> np.ndarray | None:
         path = Path(text.strip())
         if not path.is_file():
             raise FileNotFoundError(f"--zernike file not found: {path}")
-        try:
-            z = np.load(path, allow_pickle=False)
-        except (OSError, ValueError, EOFError) as exc:  # EOFError: an empty file
-            raise ValueError(f"--zernike {path}: not a readable .npy file "
-                             f"({exc or 'empty'})") from None
+        z = read_npy(path, "--zernike")
         if z.ndim != 1 or z.size == 0 or not np.isfinite(z).all():
             raise ValueError(f"--zernike {path}: expected a finite 1-D Noll vector, got shape "
                              f"{z.shape}")

@@ -295,11 +295,10 @@ def reconstruct(views, cfg: SystemConfig, method: str = "isa", zernike=None, fie
     if solver is None:
         rl_asked = iterations is not None or subsets is not None
         solver = "rl" if rl_asked or d > HQS_MAX_STEP else "hqs"
-    for name, value in (("iterations", iterations), ("subsets", subsets),
-                        ("num_workers", num_workers)):
+    for name, value, low in (("iterations", iterations, 0), ("subsets", subsets, 1),
+                             ("num_workers", num_workers, 1)):
         if value is not None and (isinstance(value, bool) or not isinstance(value, int | np.integer)
-                                  or value < (0 if name == "iterations" else 1)):
-            low = 0 if name == "iterations" else 1
+                                  or value < low):
             raise ValueError(f"{name} must be an integer >= {low} (or None), got {value!r}")
     iterations = DEFAULT_ITERATIONS if iterations is None else int(iterations)
     if solver not in _SOLVERS:

@@ -196,7 +196,7 @@ def register(app: typer.Typer) -> None:
             read_views,
             stored_extras,
         )
-        from metasensor.optics.psf_io import parse_zernike
+        from metasensor.optics.psf_io import parse_zernike, read_npy
         from metasensor.recon.api import reconstruct
 
         if psf is not None and config is not None:
@@ -236,11 +236,7 @@ def register(app: typer.Typer) -> None:
         if field_zernike is not None:
             if not field_zernike.is_file():
                 raise FileNotFoundError(f"field Zernike file not found: {field_zernike}")
-            try:
-                fz = np.load(field_zernike, allow_pickle=False)
-            except (OSError, ValueError, EOFError) as exc:  # EOFError: an empty file
-                raise ValueError(f"--field-zernike {field_zernike}: not a readable .npy file "
-                                 f"({exc or 'empty'})") from None
+            fz = read_npy(field_zernike, "--field-zernike")
         if system is not None:
             if fz is not None:
                 raise ValueError("give either --system or --field-zernike, not both")
