@@ -22,9 +22,9 @@ def atomic_path(path: str | Path, suffix: str | None = None) -> Iterator[Path]:
     as tifffile or h5py, behave) unless ``suffix`` is given. On error the temporary is removed.
     """
     path = Path(path)
+    if path.is_dir():
+        raise IsADirectoryError(f"cannot write {path}: it is a folder")
     try:
-        if path.is_dir():
-            raise IsADirectoryError(21, "it is a folder")
         path.parent.mkdir(parents=True, exist_ok=True)
         fd, tmp = tempfile.mkstemp(
             prefix=f".{path.name}.", suffix=suffix if suffix is not None else path.suffix,

@@ -63,7 +63,7 @@ def _resolve(scan_order, reference, shape) -> tuple[list[tuple[int, int]], int, 
 
 
 def _check_options(scatter: str, threshold: float, smooth: float, method: str,
-                   max_ratio: float = 0.5) -> None:
+                   max_ratio: float | None = None) -> None:
     """One-line errors for impossible options, before any flow is computed."""
     if scatter not in ("linear", "cubic"):
         raise ValueError(f"scatter must be 'linear' or 'cubic', got {scatter!r}")
@@ -72,7 +72,7 @@ def _check_options(scatter: str, threshold: float, smooth: float, method: str,
     for name, value in (("threshold", threshold), ("smooth", smooth)):
         if not (isinstance(value, int | float) and math.isfinite(value) and value >= 0):
             raise ValueError(f"{name} must be a non-negative number, got {value!r}")
-    if not (isinstance(max_ratio, int | float) and 0 < max_ratio <= 1):
+    if max_ratio is not None and not (isinstance(max_ratio, int | float) and 0 < max_ratio <= 1):
         raise ValueError(f"max_ratio must lie in (0, 1] (1 disables the test), got {max_ratio!r}")
 
 
