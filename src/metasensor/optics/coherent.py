@@ -101,8 +101,8 @@ def point_field(cfg: SystemConfig, plan: FieldPlan, a: np.ndarray, w: np.ndarray
 
     ``a, w, norm`` from :func:`pupil_samples` with the same plan. Complex tensor on device.
     """
-    p = torch.polar(torch.as_tensor(a, dtype=torch.float64),
-                    torch.as_tensor(2 * np.pi * w, dtype=torch.float64)).to(device)
+    p = torch.polar(torch.as_tensor(a, dtype=torch.float64, device=device),
+                    torch.as_tensor(2 * np.pi * w, dtype=torch.float64, device=device))
     m = plan.pupil_n
     if plan.method == "fft":
         u = torch.fft.fftshift(torch.fft.fft2(torch.fft.ifftshift(p)))
@@ -130,8 +130,8 @@ def binned_intensity_mft(cfg: SystemConfig, plan: FieldPlan, a: np.ndarray, w: n
         raise ValueError("binned_intensity_mft needs an MFT plan (plan_field(..., method='mft'))")
     if n % k:
         raise ValueError(f"grid size {n} is not a multiple of the bin {k}")
-    p = torch.polar(torch.as_tensor(a, dtype=torch.float64),
-                    torch.as_tensor(2 * np.pi * w, dtype=torch.float64)).to(device)
+    p = torch.polar(torch.as_tensor(a, dtype=torch.float64, device=device),
+                    torch.as_tensor(2 * np.pi * w, dtype=torch.float64, device=device))
     m = plan.pupil_n
     df = cfg.na / cfg.wavelength / plan.radius
     f = (np.arange(m) - m // 2) * df

@@ -164,8 +164,8 @@ def geometric_psfs(ideal: np.ndarray, shifts: np.ndarray) -> np.ndarray:
     n, _, k, _ = h.shape
     if s.shape != (n, n, 2):
         raise ValueError(f"shifts must have shape ({n}, {n}, 2), got {s.shape}")
-    out = translate_psfs(torch.as_tensor(h.reshape(n * n, k, k)),
-                         torch.as_tensor(s.reshape(n * n, 2)))
+    out = translate_psfs(torch.tensor(h.reshape(n * n, k, k), device="cpu"),
+                         torch.tensor(s.reshape(n * n, 2), device="cpu"))
     return to_numpy(out).reshape(n, n, *out.shape[-2:]).astype(np.float32)
 
 

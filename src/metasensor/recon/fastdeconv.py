@@ -102,7 +102,7 @@ def _threshold_two_thirds(beta: float) -> float:
     lo, hi = 0.0, 10.0
     for _ in range(200):
         mid = 0.5 * (lo + hi)
-        w = _solve_w_two_thirds(torch.tensor([mid], dtype=torch.float64), 1.0)
+        w = _solve_w_two_thirds(torch.tensor([mid], dtype=torch.float64, device="cpu"), 1.0)
         lo, hi = (mid, hi) if float(w[0]) == 0.0 else (lo, mid)
     return hi * beta ** -0.75
 
@@ -116,7 +116,7 @@ def solve_w(v, beta: float, alpha: float = 2.0 / 3.0):
     if not (isinstance(beta, (int, float)) and beta > 0 and math.isfinite(beta)):
         raise ValueError(f"beta must be positive and finite, got {beta!r}")
     is_np = not isinstance(v, torch.Tensor)
-    t = torch.as_tensor(np.asarray(v, dtype=np.float64)) if is_np else v
+    t = torch.from_numpy(np.array(v, dtype=np.float64)) if is_np else v
     if abs(alpha - 2.0 / 3.0) < 1e-9:
         out = _solve_w_two_thirds(t, float(beta))
     elif abs(alpha - 1.0) < 1e-12:
@@ -139,7 +139,7 @@ def solve_w_table(v: torch.Tensor, beta: float, alpha: float = 2.0 / 3.0,
     vmax = float(v.abs().max()) if v.numel() else 0.0
     if vmax <= vt:
         return torch.zeros_like(v)
-    grid = torch.linspace(0.0, vmax, n, dtype=torch.float64)
+    grid = torch.linspace(0.0, vmax, n, dtype=torch.float64, device=v.device)
     w, _ = _stationary_two_thirds(grid, float(beta))
     table = torch.where(grid > vt, w, torch.zeros_like(w)).to(device=v.device, dtype=v.dtype)
     a = v.abs()

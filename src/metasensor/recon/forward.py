@@ -141,8 +141,8 @@ class PhaseSpaceOperator:
 
     def __init__(self, psf, geometry: Geometry, device=None, chunk: int = 8):
         self.device = resolve_device(device)
-        psf_t = torch.as_tensor(np.asarray(psf) if not isinstance(psf, torch.Tensor) else psf)
-        psf_t = psf_t.to(device=self.device, dtype=torch.float32)
+        psf_t = torch.as_tensor(psf if isinstance(psf, torch.Tensor) else np.asarray(psf),
+                                dtype=torch.float32, device=self.device)
         if psf_t.ndim != 3 or psf_t.shape[-1] != psf_t.shape[-2] or psf_t.shape[-1] % 2 == 0:
             raise ValueError(
                 f"psf must have shape (views, K, K) with K odd, got {tuple(psf_t.shape)}")

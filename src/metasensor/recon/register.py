@@ -107,7 +107,7 @@ def translate_psfs(psf: torch.Tensor, shifts: torch.Tensor) -> torch.Tensor:
     centre), clipped at zero and rescaled to each PSF's own energy."""
     if psf.ndim != 3 or psf.shape[-1] != psf.shape[-2] or psf.shape[-1] % 2 == 0:
         raise ValueError(f"psf must have shape (V, K, K) with K odd, got {tuple(psf.shape)}")
-    s = torch.as_tensor(shifts, dtype=torch.float64)
+    s = torch.as_tensor(shifts, dtype=torch.float64, device=psf.device)
     if s.shape != (psf.shape[0], 2):
         raise ValueError(f"shifts must have shape ({psf.shape[0]}, 2), got {tuple(s.shape)}")
     if not torch.isfinite(s).all():
@@ -150,8 +150,8 @@ def register_views(psf, data_win, d: int, device=None, rounds: int = DEFAULT_ROU
     system ``cfg`` and the views' ``uv`` indices (one per bank row), each round's shifts are
     replaced by their wavefront-error fit (:data:`WAVEFRONT_MODES`), and a round whose fit
     explains less than :data:`MIN_EXPLAINED` of them ends the registration."""
-    psf0 = torch.as_tensor(psf, dtype=torch.float32)
-    y_win = torch.as_tensor(data_win, dtype=torch.float32)
+    psf0 = torch.as_tensor(psf, dtype=torch.float32, device="cpu")  # moved where used
+    y_win = torch.as_tensor(data_win, dtype=torch.float32, device="cpu")
     if psf0.ndim != 3 or y_win.ndim != 3 or psf0.shape[0] != y_win.shape[0]:
         raise ValueError(f"psf (V, K, K) and data_win (V, Sy, Sx) must agree in V, got "
                          f"{tuple(psf0.shape)} and {tuple(y_win.shape)}")
@@ -190,7 +190,7 @@ def register_views(psf, data_win, d: int, device=None, rounds: int = DEFAULT_ROU
         return op, pred, data, m.expand_as(pred), misfit / max(
             float(torch.linalg.vector_norm(data)), 1e-30)
 
-    total = torch.zeros((psf0.shape[0], 2), dtype=torch.float64)
+    total = torch.zeros((psf0.shape[0], 2), dtype=torch.float64, device="cpu")
     current = psf0
     op, pred, data, weight, misfit = fit(current)
     history: list[float] = []

@@ -30,8 +30,8 @@ def tukey2d(shape: tuple[int, int], alpha: float = 0.25, device=None,
     """Separable Tukey window: flat centre, raised-cosine edges of ``alpha/2`` of each side."""
 
     def tukey(n: int) -> torch.Tensor:
-        x = (torch.arange(n, dtype=torch.float64) + 0.5) / n
-        w = torch.ones(n, dtype=torch.float64)
+        x = (torch.arange(n, dtype=torch.float64, device="cpu") + 0.5) / n
+        w = torch.ones(n, dtype=torch.float64, device="cpu")
         if alpha > 0:
             edge = alpha / 2.0
             lo, hi = x < edge, x > 1.0 - edge

@@ -64,7 +64,7 @@ class SystemAberration:
             raise ValueError(f"shape must be positive, got {shape}")
         n = self.shift_grid.shape[0]
         g = torch.as_tensor(self.shift_grid.reshape(n * n * 2, 1, *self.shift_grid.shape[-2:]),
-                            dtype=torch.float32)
+                            dtype=torch.float32, device="cpu")
         if g.shape[-2:] == (1, 1):
             out = g.expand(-1, -1, h, w)
         else:
