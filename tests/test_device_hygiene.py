@@ -1,4 +1,5 @@
-"""Device hygiene: every tensor the library makes lands on the device it was asked for.
+"""Device and dtype hygiene: every tensor the library makes lands on the device it was asked for,
+in float32, whatever torch's defaults are.
 
 No GPU runs these tests, so CUDA's commonest failure (a tensor made on the default device, then
 mixed with the requested device's tensors) is caught another way: torch's default device is set
@@ -7,6 +8,9 @@ library makes without naming its device then lands on ``meta``, and mixing it wi
 or reading it, raises, exactly where a CUDA run would mix CPU and CUDA tensors. Host-side helper
 tensors say ``device="cpu"`` on purpose. ``scheduler="sync"``: torch's default device is set per
 thread, so block work must run on this one to be checked.
+
+The same runs with torch's default dtype set to float64 (a user's setting) must return float32
+and not fail on a float32/float64 mix (``index_add_`` and matrix products refuse one).
 """
 
 from __future__ import annotations
@@ -29,34 +33,43 @@ def cap():
                        seed=0)
 
 
-@pytest.fixture
-def meta_default():
-    before = torch.get_default_device()
-    torch.set_default_device("meta")
-    assert torch.zeros(1).device.type == "meta"  # the check below is live
+@pytest.fixture(params=["meta-device", "float64-dtype"])
+def hostile(request):
+    """torch's default device set to meta, or its default dtype to float64, for one test."""
+    device, dtype = torch.get_default_device(), torch.get_default_dtype()
+    if request.param == "meta-device":
+        torch.set_default_device("meta")
+        assert torch.zeros(1).device.type == "meta"  # the check below is live
+    else:
+        torch.set_default_dtype(torch.float64)
+        assert torch.zeros(1).dtype == torch.float64
     try:
-        yield
+        yield request.param
     finally:
-        torch.set_default_device(before)
+        torch.set_default_device(device)
+        torch.set_default_dtype(dtype)
 
 
-def test_meta_default_catches_an_unplaced_tensor(meta_default):
-    # the mechanism itself: a tensor made without a device cannot meet the requested device's
+def test_hostile_defaults_catch_an_unplaced_tensor(hostile):
+    # the mechanism itself: a tensor made without naming its device (dtype) cannot meet the
+    # requested device's (a float32 tensor) where the operation needs them to agree
+    a = torch.zeros(3, 2, dtype=torch.float32, device="cpu")
     with pytest.raises((RuntimeError, NotImplementedError)):
-        float((torch.ones(3, device="cpu") * torch.ones(3)).sum())
+        a.index_add_(0, torch.tensor([0], device="cpu"), torch.ones(1, 2))
 
 
-def test_optics_and_simulator_place_their_tensors(meta_default):
+def test_optics_and_simulator_place_their_tensors(hostile):
     cfg = ms.SystemConfig()
-    assert ms.view_psfs(cfg, zernike=Z, device="cpu").shape[:2] == (15, 15)
-    assert ms.widefield_psf(cfg, zernike=Z, device="cpu").ndim == 2
+    bank = ms.view_psfs(cfg, zernike=Z, device="cpu", cache=False)
+    assert bank.shape[:2] == (15, 15) and bank.dtype == np.float32
+    assert ms.widefield_psf(cfg, zernike=Z, device="cpu").dtype == np.float32
     cap = ms.simulate(load_scene("chart", 48), cfg, snr_db=30.0, seed=0, device="cpu",
                       field_zernike=lambda fy, fx: np.multiply.outer(fy**2 + fx**2, Z),
                       field_blocks=(1, 2))
-    assert np.isfinite(cap.views).all()
+    assert np.isfinite(cap.views).all() and cap.views.dtype == np.float32
 
 
-def test_realign_places_its_tensors(cap, meta_default):
+def test_realign_places_its_tensors(cap, hostile):
     np.testing.assert_array_equal(ms.realign(cap.frames, cap.config), cap.views)
 
 
@@ -68,12 +81,13 @@ def test_realign_places_its_tensors(cap, meta_default):
     dict(method="geometric", iterations=2),            # geometric DAO
     dict(method="wave", iterations=2),                 # wave-optics DAO
 ], ids=["hqs", "rl", "blocks", "register", "geometric", "wave"])
-def test_reconstruct_places_its_tensors(cap, meta_default, kwargs):
+def test_reconstruct_places_its_tensors(cap, hostile, kwargs):
     rec = ms.reconstruct(cap.views, cap.config, device="cpu", scheduler="sync", **kwargs)
-    assert rec.image.shape == cap.truth.shape and np.isfinite(rec.image).all()
+    assert rec.image.shape == cap.truth.shape and rec.image.dtype == np.float32
+    assert np.isfinite(rec.image).all()
 
 
-def test_depth_places_its_tensors(cap, meta_default):
+def test_depth_places_its_tensors(cap, hostile):
     n = cap.config.nnum
     grid = np.random.default_rng(0).normal(0, 0.2, (n, n, 2, 2, 2)).astype(np.float32)
     sa = SystemAberration(zernike=np.zeros((1, 1, 45), np.float32), shift_grid=grid,
@@ -81,4 +95,4 @@ def test_depth_places_its_tensors(cap, meta_default):
     for calibration in (None, sa):  # with a system aberration, the views are warped first
         d = ms.estimate_depth(cap.views, cap.config, calibration=calibration, candidates=8,
                               device="cpu")
-        assert np.isfinite(d.disparity).all()
+        assert np.isfinite(d.disparity).all() and d.disparity.dtype == np.float32

@@ -105,7 +105,7 @@ def gauss_newton_refine(views: torch.Tensor, au, av, disparity: torch.Tensor,
     d = d0.clone()
     for _ in range(int(iterations)):
         # per-sector sums of W, g, W², gW, g²: (5, 9, H, W)
-        sums = torch.zeros((5, 9, h, w), device=dev)
+        sums = torch.zeros((5, 9, h, w), dtype=torch.float32, device=dev)
         for start in range(0, n, chunk):
             sl = slice(start, min(n, start + chunk))
             py = ys[None] + d[None] * au_t[sl, None, None]
@@ -119,8 +119,8 @@ def gauss_newton_refine(views: torch.Tensor, au, av, disparity: torch.Tensor,
             terms = torch.stack([wv, gv, wv * wv, gv * wv, gv * gv], dim=0)  # (5, m, H, W)
             sums.index_add_(1, sector[sl], terms)
         best_var = None
-        num = torch.zeros((h, w), device=dev)
-        den = torch.zeros((h, w), device=dev)
+        num = torch.zeros((h, w), dtype=torch.float32, device=dev)
+        den = torch.zeros((h, w), dtype=torch.float32, device=dev)
         for members in groups:
             m = float(count[members].sum())
             s_w, s_g, s_ww, s_gw, s_gg = sums[:, members].sum(1)
