@@ -141,7 +141,7 @@ def solve_w_table(v: torch.Tensor, beta: float, alpha: float = 2.0 / 3.0,
         return torch.zeros_like(v)
     grid = torch.linspace(0.0, vmax, n, dtype=torch.float64, device=v.device)
     w, _ = _stationary_two_thirds(grid, float(beta))
-    table = torch.where(grid > vt, w, torch.zeros_like(w)).to(device=v.device, dtype=v.dtype)
+    table = torch.where(grid > vt, w, torch.zeros_like(w)).to(dtype=v.dtype)
     a = v.abs()
     a.mul_((n - 1) / vmax).add_(0.5)
     out = table[a.long()]
