@@ -25,6 +25,7 @@ from metasensor.simulation.scenes import load_scene
 
 Z = np.zeros(12, np.float32)
 Z[3], Z[5] = 0.3, 0.2  # Noll 4 (defocus) and 6 (astigmatism), waves
+Z_BANK_ERROR = Z * np.float32([1, 1, 1, 0] + [1] * 8)  # a bank without the capture's defocus
 
 
 @pytest.fixture(scope="module")
@@ -77,7 +78,7 @@ def test_realign_places_its_tensors(cap, hostile):
     dict(zernike=Z),                                   # HQS, one block
     dict(zernike=Z, iterations=2),                     # Richardson–Lucy
     dict(zernike=Z, blocks=(2, 2)),                    # padded windows (masked products)
-    dict(zernike=Z, register=True, iterations=2),      # view registration
+    dict(zernike=Z_BANK_ERROR, register=True, iterations=2),  # registration (shifts the bank)
     dict(method="geometric", iterations=2),            # geometric DAO
     dict(method="wave", iterations=2),                 # wave-optics DAO
 ], ids=["hqs", "rl", "blocks", "register", "geometric", "wave"])
@@ -85,6 +86,8 @@ def test_reconstruct_places_its_tensors(cap, hostile, kwargs):
     rec = ms.reconstruct(cap.views, cap.config, device="cpu", scheduler="sync", **kwargs)
     assert rec.image.shape == cap.truth.shape and rec.image.dtype == np.float32
     assert np.isfinite(rec.image).all()
+    if kwargs.get("register"):  # the bank error made it measure and apply shifts (2.6 px first)
+        assert len(rec.registration[0][0]) >= 2 and rec.registration[0][0][0] > 1.0
 
 
 def test_depth_places_its_tensors(cap, hostile):
