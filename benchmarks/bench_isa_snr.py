@@ -21,20 +21,19 @@ reaches 0.90 between 30 and 35 dB. Writes ``benchmarks/results/isa_snr.png``.
 from __future__ import annotations
 
 import sys
-import time
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent / "src"))
+sys.path.insert(0, str(HERE))  # bench_isa_quality.measure
 
 SNRS = (30.0, 35.0, 40.0, 50.0, 60.0, None)
 CASES_FULL = (("camera", 192), ("coffee", 512))
-TARGET = 0.90
 
 
 def run(quick: bool = False) -> list[dict]:
     import metasensor as ms
-    from metasensor.metrics import psnr, ssim
+    from bench_isa_quality import measure  # the same contract call and metrics
     from metasensor.simulation.scenes import load_scene
 
     cfg = ms.SystemConfig()
@@ -45,20 +44,7 @@ def run(quick: bool = False) -> list[dict]:
         scene = load_scene(name, size)
         for snr in snrs:
             cap = ms.simulate(scene, cfg, snr_db=snr, seed=0)
-            truth = cap.truth
-            rng = float(truth.max() - truth.min())
-            t0 = time.perf_counter()
-            rec = ms.reconstruct(cap.views, cap.config, method="isa", zernike=None,
-                                 field_zernike=None, blocks=(1, 1), overlap=20,
-                                 iterations=None, device=None)
-            seconds = time.perf_counter() - t0
-            s = ssim(rec.image, truth, data_range=rng)
-            rows.append({"scene": name, "size": size, "truth_px": truth.shape[0],
-                         "snr_target": snr, "snr_db": round(float(cap.snr_db), 2),
-                         "isa_ssim": s, "isa_psnr_db": float(psnr(rec.image, truth,
-                                                                  data_range=rng)),
-                         "sensor2d_ssim": ssim(cap.sensor2d, truth, data_range=rng),
-                         "meets_0.90": bool(s >= TARGET), "seconds": seconds})
+            rows.append({"scene": name, "size": size, "snr_target": snr, **measure(cap)})
     if not quick:
         _plot(rows, HERE / "results" / "isa_snr.png")
     return rows
@@ -76,6 +62,8 @@ def _plot(rows: list[dict], path: Path) -> None:
                         label=f"{scene[0]} {scene[1]} px: ISA")
         ax.plot(x, [r["sensor2d_ssim"] for r in sel], "x:", color=line.get_color(),
                 label=f"{scene[0]} {scene[1]} px: 2D sensor")
+    from bench_isa_quality import TARGET
+
     ax.axhline(TARGET, color="k", lw=0.8, ls="--")
     ax.set_xlabel("SNR of the views [dB] (rightmost: no noise, quantisation only)")
     ax.set_ylabel("SSIM to truth")
