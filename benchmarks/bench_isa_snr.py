@@ -9,12 +9,13 @@ by the contract call (the default solver, ``recon.hqs``). SSIM (skimage, data_ra
 truth) against ``cap.truth``, next to the capture's own 2D sensor at the same SNR.
 
 What it shows: the noise is not the camera's only limit. Its SSIM still stops at 0.89 without
-noise. There the data weight is set by the reconstruction's model error (the simulator computes
-on a finer grid: 4e-4 relative), and on the MLA's conjugate plane every view samples the field at
-the same positions (every 3 px), so what lies beyond 1/6 cycle/px is told apart only by the views'
-PSF shapes, in directions weaker than that error (``bench_scan_period``, ``bench_isa_limit``: on
-data that follow the model exactly the best linear fit reaches 0.99). Weighing the data more
-lowers it (measured without noise, ``lam_scale`` 0.3 / 3 / 30: 0.894 / 0.885 / 0.856). Coffee
+noise. There the views differ from the reconstruction's model by 5e-4 relative (median view, up
+to 1.8e-3 in the outer views: the simulator computes on a finer grid), and on the MLA's conjugate
+plane every view samples the field at the same positions (every 3 px), so what lies beyond 1/6
+cycle/px is told apart only by the views' PSF shapes, in weak directions that amplify that error
+(``bench_scan_period``, ``bench_isa_limit``: on data that follow the model exactly the best linear
+fit reaches 0.99). Weighing the data more lowers it (measured without noise, ``lam_scale``
+0.3 / 3 / 30: 0.894 / 0.885 / 0.856). Coffee
 reaches 0.90 between 30 and 35 dB. Writes ``benchmarks/results/isa_snr.png``.
 """
 
