@@ -95,7 +95,7 @@ def denoised_2d(cap, truth, rng: float) -> dict:
 
 
 def _plot(rows: list[dict], path: Path) -> None:
-    from metasensor.io.figures import new_figure, save_figure
+    from metasensor.io.figures import new_figure
 
     fig, axes = new_figure(size=(5.2, 3.6))
     ax = axes[0, 0]
@@ -107,11 +107,19 @@ def _plot(rows: list[dict], path: Path) -> None:
                 label="2D sensor (dotted, same colour)" if i == 0 else None)
         ax.plot(x, [r["sensor2d_denoised_ssim"] for r in sel], "+--", color=line.get_color(),
                 label="2D sensor denoised, best TV/NLM (dashed)" if i == 0 else None)
-    ax.axhline(TARGET, color="k", lw=0.8, ls="--")
     ax.set_xscale("log")
-    ax.set_xlabel("field (truth pixels per side)")
+    finish_ssim_plot(fig, ax, path, "field (truth pixels per side)",
+                     "ISA (default solver) vs 2D sensor, aberration-free, 30 dB")
+
+
+def finish_ssim_plot(fig, ax, path: Path, xlabel: str, title: str) -> None:
+    """The SSIM plots' common end: the target line, labels, legend, and the atomic PNG."""
+    from metasensor.io.figures import save_figure
+
+    ax.axhline(TARGET, color="k", lw=0.8, ls="--")
+    ax.set_xlabel(xlabel)
     ax.set_ylabel("SSIM to truth")
-    ax.set_title("ISA (default solver) vs 2D sensor, aberration-free, 30 dB", fontsize=9)
+    ax.set_title(title, fontsize=9)
     ax.legend(fontsize=6)
     save_figure(fig, path, dpi=120)
 
