@@ -71,17 +71,19 @@ class MosaicLayout:
         return pairs
 
     def tile_field_zernike(self, fz_lens, index: tuple[int, int],
-                           tile_shape: tuple[int, int] | None = None, offset: float = 0.0):
+                           tile_shape: tuple[int, int] | None = None,
+                           offset: float | tuple[float, float] = 0.0):
         """The lens's field aberration ``fz_lens(yn, xn)`` (mosaic-normalised coordinates)
         re-expressed in the normalised coordinates of one tile's image of ``tile_shape``
-        (default the tile), whose pixel (y, x) is tile pixel (y + offset, x + offset)."""
+        (default the tile), whose pixel (y, x) is tile pixel (y + offset_y, x + offset_x)."""
         h, w = self.shape
         oy, ox = self.origin(index)
         ih, iw = tile_shape or self.tile_shape
+        dy, dx = (offset, offset) if np.isscalar(offset) else (float(v) for v in offset)
 
         def fz(yn, xn):
-            y = (np.asarray(yn, float) + 1.0) * ih / 2.0 - 0.5 + offset + oy
-            x = (np.asarray(xn, float) + 1.0) * iw / 2.0 - 0.5 + offset + ox
+            y = (np.asarray(yn, float) + 1.0) * ih / 2.0 - 0.5 + dy + oy
+            x = (np.asarray(xn, float) + 1.0) * iw / 2.0 - 0.5 + dx + ox
             return fz_lens(2.0 * (y + 0.5) / h - 1.0, 2.0 * (x + 0.5) / w - 1.0)
 
         return fz

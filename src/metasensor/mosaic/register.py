@@ -54,9 +54,8 @@ def register_pair(tile_a, tile_b, nominal: tuple[int, int], upsample: int = 100,
     from skimage.filters import window
     from skimage.registration import phase_cross_correlation
 
-    a = np.asarray(tile_a, dtype=np.float64)
-    b = np.asarray(tile_b, dtype=np.float64)
-    if a.ndim != 2 or a.shape != b.shape:
+    a, b = tile_a, tile_b  # NumPy or Zarr arrays: only the overlap strips are read
+    if len(a.shape) != 2 or tuple(a.shape) != tuple(b.shape):
         raise ValueError(f"tiles must be 2-D arrays of one shape, got {a.shape} and {b.shape}")
     total = np.zeros(2)
     error = 1.0
@@ -65,7 +64,7 @@ def register_pair(tile_a, tile_b, nominal: tuple[int, int], upsample: int = 100,
         frac = total - whole
         # b shifted by its offset so far: b's pixel p then shows what a shows at nominal + p
         nominal_now = (int(nominal[0]) + int(whole[0]), int(nominal[1]) + int(whole[1]))
-        sa, sb = _strips(a, b, nominal_now)
+        sa, sb = (np.asarray(x, dtype=np.float64) for x in _strips(a, b, nominal_now))
         if min(sa.shape) <= 2 * margin + 8:
             raise ValueError(f"overlap {sa.shape} too small to register (margin {margin})")
         if frac.any():

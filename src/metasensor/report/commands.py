@@ -19,13 +19,35 @@ def register(app: typer.Typer) -> None:
         snr: float = typer.Option(30.0, "--snr", help="SNR of the captures in dB"),
         blocks: str = typer.Option("3x3", "--blocks", help="multisite blocks, e.g. 4x4"),
         seed: int = typer.Option(0, "--seed", help="random seed"),
+        scenario: str = typer.Option("single-lens", "--scenario",
+                                     help="single-lens (default), plastic-wrap, telescope or "
+                                          "gigapixel (the paper's Figs. 3, 5 and ED Fig. 7)"),
+        scheduler: str = typer.Option(None, "--scheduler",
+                                      help="gigapixel: Dask scheduler address "
+                                           "(tcp://host:8786); default local threads"),
     ) -> None:
         """Simulate the built-in resolution chart through a cheap single lens, reconstruct it,
-        and write a report (PNG figures, index.html, summary.json).
+        and write a report (PNG figures, index.html, summary.json); or run one of the paper's
+        experiments with --scenario.
 
-        Example: metasensor demo --out demo/
+        Example: metasensor demo --out demo/ ; metasensor demo --scenario telescope --out tel/
         """
         from metasensor.report.demo import DemoSettings, run_demo
+        from metasensor.scenarios import SCENARIOS, run_scenario
+
+        if scenario not in SCENARIOS:
+            raise typer.BadParameter(f"unknown scenario {scenario!r}; choose from "
+                                     f"{', '.join(SCENARIOS)}", param_hint="--scenario")
+        if scheduler is not None and scenario != "gigapixel":
+            raise typer.BadParameter("applies to --scenario gigapixel only",
+                                     param_hint="--scheduler")
+        if scenario != "single-lens":
+            summary = run_scenario(scenario, out, seed=seed, scheduler=scheduler)
+            for row in summary["table"]:
+                typer.echo("  ".join(f"{k}={v:.3f}" if isinstance(v, float) else f"{k}={v}"
+                                     for k, v in row.items()))
+            typer.echo(f"report: {Path(out) / 'index.html'} ({summary['seconds']:.0f} s)")
+            return
 
         try:
             by, bx = (int(v) for v in blocks.lower().split("x"))

@@ -241,10 +241,15 @@ class LayeredTurbulence(Turbulence):
     """Layered frozen-flow turbulence (module docstring); ``d_over_r0`` is the total D / r0 at the
     wavelength, ``layers`` the :class:`Layer` s, ``seed`` all randomness (the ``seed`` of
     :meth:`screens` is ignored, so the simulator and the truth see the same screens).
-    ``wind`` of the base class is unused."""
+    ``wind`` of the base class is unused. ``t0``: frame time of the first frame that
+    :meth:`screens` returns (consecutive scan periods of one sequence: ``t0 = k · p²``);
+    ``span``: frames the whole sequence lasts (the screens are made large enough for it and are
+    the same for every ``t0``)."""
 
     layers: tuple[Layer, ...] = field(default=DEFAULT_LAYERS)
     seed: int = 0
+    t0: int = 0
+    span: int = 25
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -252,14 +257,27 @@ class LayeredTurbulence(Turbulence):
             raise ValueError("layers must be a non-empty tuple of Layer")
         if not all(x.weight > 0 and x.spread >= 0 for x in self.layers):
             raise ValueError("layer weights must be positive and spreads non-negative")
+        if not (isinstance(self.t0, int) and self.t0 >= 0 and isinstance(self.span, int)
+                and self.span >= 1):
+            raise ValueError(f"t0 must be >= 0 and span >= 1 (integers), got {self.t0!r}, "
+                             f"{self.span!r}")
 
-    def _big(self, n_frames: int) -> tuple[np.ndarray, list[tuple[float, float]]]:
-        return _layer_screens(self, int(n_frames))
+    def at(self, t0: int) -> LayeredTurbulence:
+        """The same turbulence, its :meth:`screens` starting at frame ``t0``."""
+        import dataclasses
 
-    def screen(self, t: float, n_frames: int, yn: float = 0.0, xn: float = 0.0) -> np.ndarray:
-        """(samples, samples) wavefront (waves, piston removed) at frame time ``t`` (of a
-        sequence of ``n_frames``) seen from normalised field point (yn, xn)."""
-        bigs, starts = self._big(n_frames)
+        return dataclasses.replace(self, t0=int(t0))
+
+    def _big(self) -> tuple[np.ndarray, list[tuple[float, float]]]:
+        import dataclasses
+
+        base = dataclasses.replace(self, t0=0)  # one set of screens for the whole sequence
+        return _layer_screens(base, self.span)
+
+    def screen(self, t: float, yn: float = 0.0, xn: float = 0.0) -> np.ndarray:
+        """(samples, samples) wavefront (waves, piston removed) at frame time ``t`` (0 ..
+        span − 1) seen from normalised field point (yn, xn)."""
+        bigs, starts = self._big()
         s = self.samples
         out = np.zeros((s, s))
         for big, start, layer in zip(bigs, starts, self.layers, strict=True):
@@ -272,18 +290,18 @@ class LayeredTurbulence(Turbulence):
         """(T, samples, samples) float32 on-axis screens in waves (simulate's interface)."""
         if n_frames < 1:
             raise ValueError(f"n_frames must be >= 1, got {n_frames}")
-        return np.stack([self.screen(t, n_frames) for t in range(n_frames)]).astype(np.float32)
+        return np.stack([self.screen(self.t0 + t) for t in range(n_frames)]).astype(np.float32)
 
     def field_zernike(self, n_frames: int, t: float | None = None, jmax: int = 45):
         """Callable ``f(yn, xn) -> (..., jmax)``: Noll vectors (modes 4..jmax) of the field
         point's wavefront minus the on-axis one at frame time ``t`` (default: the sequence's
-        centre), the anisoplanatic part that ``simulate(field_zernike=...)`` adds."""
-        t = (n_frames - 1) / 2 if t is None else float(t)
-        axis = fit_screen(self.screen(t, n_frames), jmax)
+        centre, after ``t0``), the anisoplanatic part that ``simulate(field_zernike=...)`` adds."""
+        t = self.t0 + (n_frames - 1) / 2 if t is None else float(t)
+        axis = fit_screen(self.screen(t), jmax)
 
         def fz(yn, xn):
             yn, xn = np.broadcast_arrays(np.asarray(yn, float), np.asarray(xn, float))
-            flat = [fit_screen(self.screen(t, n_frames, a, b), jmax) - axis
+            flat = [fit_screen(self.screen(t, a, b), jmax) - axis
                     for a, b in zip(yn.ravel(), xn.ravel(), strict=True)]
             return np.asarray(flat).reshape(*yn.shape, jmax)
 
@@ -291,9 +309,10 @@ class LayeredTurbulence(Turbulence):
 
     def mean_zernike(self, n_frames: int, yn: float = 0.0, xn: float = 0.0,
                      jmax: int = 45) -> np.ndarray:
-        """Noll vector (modes 4..jmax) of the field point's wavefront averaged over the frames."""
-        return np.mean([fit_screen(self.screen(t, n_frames, yn, xn), jmax)
-                        for t in range(n_frames)], axis=0)
+        """Noll vector (modes 4..jmax) of the field point's wavefront averaged over the frames
+        ``t0 .. t0 + n_frames − 1``."""
+        return np.mean([fit_screen(self.screen(t, yn, xn), jmax)
+                        for t in range(self.t0, self.t0 + n_frames)], axis=0)
 
 
 @functools.lru_cache(maxsize=8)

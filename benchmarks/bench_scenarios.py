@@ -1,0 +1,169 @@
+"""The paper's three remaining experiments as scenarios, and the mosaic stitcher at full size.
+
+Rows:
+- ``plastic-wrap``, ``telescope``, ``gigapixel``: each scenario's demo (``metasensor demo
+  --scenario NAME``) with its acceptance figures and its run time on this machine.
+- ``stitch``: the mosaic stitcher on full-sensor tiles (the prototype's 6,000 x 8,000 pixels,
+  2 x 2 positions, 256-pixel overlaps: about 185 MP out; ``--quick``: 1,000 x 1,200 tiles).
+  The tiles are a band-limited synthetic texture (24 seeded plane waves, evaluated exactly at
+  every tile's true sub-pixel position, so the known offsets are exact) written to Zarr chunk by
+  chunk; registration, blending and the pyramid run in a child process whose peak resident
+  memory is measured. Seconds per megapixel and the extrapolated time for one gigapixel are
+  the stitcher's alone (tile reconstruction: ``bench_stream``); per worker: the wall time times
+  the cores used, per megapixel.
+- ``stitch-cluster``: the same small mosaic through a ``dask.distributed`` LocalCluster (2
+  processes x 1 thread) against local threads: max |difference|.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE.parent / "src"))
+
+
+def _waves(seed: int, k: int = 24):
+    rng = np.random.default_rng(seed)
+    f = rng.uniform(0.01, 0.2, k) * rng.choice([-1, 1], k)
+    g = rng.uniform(0.01, 0.2, k) * rng.choice([-1, 1], k)
+    return f, g, rng.uniform(0, 2 * np.pi, k), rng.uniform(0.5, 1.0, k)
+
+
+def texture(y0: float, x0: float, h: int, w: int, seed: int = 0) -> np.ndarray:
+    """(h, w) float32 texture at rows y0 + i, columns x0 + j (separable plane waves)."""
+    f, g, ph, amp = _waves(seed)
+    ay = 2 * np.pi * np.outer(f, y0 + np.arange(h)) + ph[:, None]
+    ax = 2 * np.pi * np.outer(g, x0 + np.arange(w))
+    img = (np.cos(ay) * amp[:, None]).T @ np.cos(ax) - (np.sin(ay) * amp[:, None]).T @ np.sin(ax)
+    return (100.0 + 10.0 * img).astype(np.float32)
+
+
+def _write_tiles(folder: Path, layout, jitter: float, seed: int):
+    import zarr
+
+    rng = np.random.default_rng(seed + 1)
+    paths, true = {}, {}
+    th, tw = layout.tile_shape
+    for k in layout.indices:
+        oy, ox = layout.origin(k)
+        if k != (0, 0):
+            oy, ox = oy + rng.uniform(-jitter, jitter), ox + rng.uniform(-jitter, jitter)
+        true[k] = (float(oy), float(ox))
+        z = zarr.open_array(str(folder / f"tile_{k[0]}_{k[1]}.zarr"), mode="w", shape=(th, tw),
+                            chunks=(1024, 1024), dtype="f4", zarr_format=2)
+        for y in range(0, th, 1024):
+            z[y:y + 1024] = texture(oy + y, ox, min(1024, th - y), tw, seed)
+        paths[k] = str(folder / f"tile_{k[0]}_{k[1]}.zarr")
+    return paths, true
+
+
+def stitch(tile_shape, grid, overlap: int, chunk: int, seed: int = 0, scheduler=None,
+           folder: str | None = None) -> dict:
+    """Write synthetic tiles, register, blend; returns timings and errors."""
+    import zarr
+
+    from metasensor.mosaic import MosaicLayout, blend_tiles, register_tiles, solve_positions
+
+    layout = MosaicLayout(tuple(tile_shape), tuple(grid), overlap)
+    work = Path(folder or tempfile.mkdtemp(prefix="stitch_"))
+    paths, true = _write_tiles(work, layout, 2.0, seed)
+    t0 = time.perf_counter()
+    tiles = {k: zarr.open_array(p, mode="r") for k, p in paths.items()}
+    pos = solve_positions(register_tiles(tiles, layout), layout)
+    t_reg = time.perf_counter() - t0
+    err = max(float(np.hypot(pos[k][0] - true[k][0], pos[k][1] - true[k][1]))
+              for k in layout.indices)
+    t1 = time.perf_counter()
+    out = blend_tiles(paths, pos, layout.shape, work / "mosaic.ome.zarr", chunk=chunk,
+                      ramp=overlap // 2, scheduler=scheduler, num_workers=os.cpu_count())
+    t_blend = time.perf_counter() - t1
+    mp = layout.shape[0] * layout.shape[1] / 1e6
+    return {"tiles": len(paths), "tile_shape": list(tile_shape), "mosaic_mp": mp,
+            "registration_error_px": err, "register_s": t_reg, "blend_s": t_blend,
+            "s_per_mp": (t_reg + t_blend) / mp, "out": str(out), "folder": str(work)}
+
+
+def _child_stitch(tile_shape, grid, overlap, chunk) -> dict:
+    """Run :func:`stitch` in a fresh process; add its peak resident memory (GB)."""
+    call = f"b.stitch({list(tile_shape)!r}, {list(grid)!r}, {int(overlap)}, {int(chunk)})"
+    code = (f"import json,sys; sys.path.insert(0, {str(HERE)!r}); import bench_scenarios as b; "
+            f"print(json.dumps({call}))")
+    before = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True, env={**os.environ, "OMP_NUM_THREADS": "1"})
+    peak = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
+    row = json.loads(res.stdout.strip().splitlines()[-1])
+    row["peak_gb"] = max(peak, before) / 1024**2  # ru_maxrss: kilobytes on Linux
+    return row
+
+
+def _cluster_row() -> dict:
+    import shutil
+
+    from distributed import LocalCluster
+
+    from metasensor.mosaic import open_mosaic
+
+    a = stitch((400, 500), (2, 2), 64, 128)
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                      dashboard_address=None) as cluster:
+        b = stitch((400, 500), (2, 2), 64, 128, scheduler=cluster)
+    diff = float(np.abs(open_mosaic(a["out"])[:] - open_mosaic(b["out"])[:]).max())
+    for r in (a, b):
+        shutil.rmtree(r["folder"], ignore_errors=True)
+    return {"case": "stitch-cluster", "max_abs_diff": diff, "ok": diff <= 1e-5}
+
+
+def _scenario_rows(quick: bool) -> list[dict]:
+    from metasensor.scenarios import run_scenario
+
+    small = {"plastic-wrap": {"size": 144, "blocks": (3, 3), "grid": (3, 3)},
+             "telescope": {"size": 120}, "gigapixel": {"tile": 120}} if quick else {}
+    rows = []
+    for name in ("plastic-wrap", "telescope", "gigapixel"):
+        with tempfile.TemporaryDirectory() as tmp:
+            s = run_scenario(name, tmp, progress=False, **small.get(name, {}))
+        row = {"case": name, "seconds": s["seconds"]}
+        if name == "plastic-wrap":
+            row.update({k: s["gains"][k] for k in s["gains"]})
+        elif name == "telescope":
+            row.update({"pupil_error": s["pupil"]["error"],
+                        "residual_max_waves": s["residual_max_waves"],
+                        "dao_gain_db": s["dao_gain_db"], "dao_over_2d_db": s["dao_over_2d_db"],
+                        "kymo_lattice_ratio": s["kymograph"]["lattice_corrected_over_static"]})
+        else:
+            row.update({"registration_error_px": s["registration_error_px"],
+                        "seam_ratio": s["table"][1]["seam_ratio"],
+                        "truth_seam_ratio": s["table"][1]["truth_seam_ratio"]})
+        rows.append(row)
+    return rows
+
+
+def run(quick: bool = False) -> list[dict]:
+    import shutil
+
+    rows = _scenario_rows(quick)
+    shape = (1000, 1200) if quick else (6000, 8000)
+    st = _child_stitch(shape, (2, 2), 64 if quick else 256, 512 if quick else 2048)
+    shutil.rmtree(st.pop("folder"), ignore_errors=True)
+    st.pop("out")
+    cores = os.cpu_count() or 1
+    st.update({"case": "stitch", "gigapixel_s": st["s_per_mp"] * 1000,
+               "s_per_mp_per_worker": st["s_per_mp"] * cores, "cores": cores})
+    rows.append(st)
+    rows.append(_cluster_row())
+    return rows
+
+
+if __name__ == "__main__":
+    print(json.dumps(run(quick="--quick" in sys.argv), indent=1))
