@@ -35,14 +35,16 @@ def run_depth(views: Path, out: Path, system: Path | None = None, config: Path |
     from metasensor.config import SystemConfig
     from metasensor.depth.estimate import estimate_depth
     from metasensor.depth.figure import depth_figure
-    from metasensor.io.atomic import atomic_path, atomic_write_text, refuse_overwrite
+    from metasensor.io.atomic import StagedFolder, atomic_path, atomic_write_text
+    from metasensor.io.guard import guard
     from metasensor.io.views import check_against_stored, read_config_from_views, read_views
 
     views = Path(views)
     if not views.exists():
         raise FileNotFoundError(f"view stack not found: {views}")
     out = Path(out)
-    refuse_overwrite([out / f"{n}.{ext}" for n, ext in OUTPUT_FILES], [views, system, config])
+    names = [f"{n}.{ext}" for n, ext in OUTPUT_FILES]
+    guard([views, system, config], [out / n for n in names], folders=[out])
     if config is not None:
         cfg = SystemConfig.from_toml(config)
         stored = read_config_from_views(views, strict=False)
@@ -58,7 +60,7 @@ def run_depth(views: Path, out: Path, system: Path | None = None, config: Path |
     res = estimate_depth(stack, cfg, calibration=system, candidates=candidates,
                          disparity_range=_parse_range(disparity_range), occlusion=occlusion,
                          radius=radius, device=device, progress=progress)
-    out.mkdir(parents=True, exist_ok=True)
+    staged = StagedFolder(out, names)  # the folder appears complete, or not at all
     maps = {"disparity": res.disparity, "confidence": res.confidence,
             "image_depth": res.image_depth}
     if res.object_distance is not None:
@@ -68,14 +70,15 @@ def run_depth(views: Path, out: Path, system: Path | None = None, config: Path |
     written = {}
     for name, arr in maps.items():
         path = out / f"{name}.tif"
-        with atomic_path(path) as tmp:
+        with atomic_path(staged.path / path.name) as tmp:
             tifffile.imwrite(tmp, np.asarray(arr, dtype=np.float32),
                              description=json.dumps({"metasensor": {"kind": name,
                                                                     "unit": units[name]}}),
                              metadata=None)
         written[name] = str(path)
     c = cfg.center
-    written["figure"] = str(depth_figure(res, stack[c, c], out / "depth.png"))
+    depth_figure(res, stack[c, c], staged.path / "depth.png")
+    written["figure"] = str(out / "depth.png")
     summary = {"views": str(views), "shape": list(res.disparity.shape),
                "depth_kind": res.depth_kind, "candidates": [float(res.candidates[0]),
                                                             float(res.candidates[-1]),
@@ -83,7 +86,8 @@ def run_depth(views: Path, out: Path, system: Path | None = None, config: Path |
                "median_disparity": float(np.median(res.disparity)),
                "disparity_p5_p95": [float(v) for v in np.percentile(res.disparity, [5, 95])],
                "mean_confidence": float(res.confidence.mean()), "files": written}
-    atomic_write_text(out / "depth.json", json.dumps(summary, indent=2))
+    atomic_write_text(staged.path / "depth.json", json.dumps(summary, indent=2))
+    staged.commit()
     return summary
 
 

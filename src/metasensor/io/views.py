@@ -60,27 +60,34 @@ def write_views(path: str | Path, views: np.ndarray, cfg: SystemConfig | None = 
 
 
 def _write_zarr(path: Path, views: np.ndarray, meta: dict) -> Path:
+    """Write the store under a unique temporary name, then swap it in (:func:`replace_tree`);
+    an existing folder is replaced only if it is a metasensor Zarr store."""
     import shutil
 
     import zarr
 
-    tmp = path.with_name(f".{path.name}.tmp")
-    if tmp.exists():
-        shutil.rmtree(tmp)
+    from metasensor.io.atomic import is_own_zarr, remove_stale, replace_tree, sibling_name
+
+    if path.exists() and not is_own_zarr(path):
+        raise ValueError(f"{path} exists and is not a Zarr store written by metasensor: not "
+                         "replaced")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    remove_stale(path)
+    tmp = path.parent / sibling_name(path, "tmp", suffix=".zarr")
     n = views.shape[0]
     try:
-        arr = zarr.open_array(str(tmp), mode="w", shape=views.shape, dtype=views.dtype,
+        arr = zarr.open_array(str(tmp), mode="w-", shape=views.shape, dtype=views.dtype,
                               chunks=(1, 1, min(1024, views.shape[2]), min(1024, views.shape[3])))
         for u in range(n):
             arr[u] = views[u]
         arr.attrs.update(meta)
-        if path.is_dir():
-            shutil.rmtree(path)
-        elif path.exists():
-            raise ValueError(f"{path} exists and is not a Zarr store (a folder): not replaced")
-        tmp.rename(path)
-    except BaseException:
+        replace_tree(tmp, path)
+    except BaseException as exc:
         shutil.rmtree(tmp, ignore_errors=True)  # no half-written store left behind
+        if isinstance(exc, OSError):
+            from metasensor.io.atomic import write_error
+
+            raise write_error(path, exc) from None
         raise
     return path
 

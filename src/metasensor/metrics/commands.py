@@ -64,16 +64,21 @@ def register(app: typer.Typer) -> None:
 
         Example: metasensor evaluate result/image.tif --truth cap/truth.tif --chart --out eval/
         """
-        from metasensor.metrics.evaluation import evaluate_full, write_evaluation
+        from metasensor.io.atomic import StagedFolder
+        from metasensor.io.guard import guard
+        from metasensor.metrics.evaluation import OUTPUT_FILES, evaluate_full, write_evaluation
 
+        if out is None:
+            out = result.parent / f"{result.stem}_evaluation"
+        guard([result, truth], [out / n for n in OUTPUT_FILES], folders=[out])
         img = read_image(result, "result image")
         ref = read_image(truth, "truth image") if truth is not None else None
         rois = [parse_roi(r) for r in roi] if roi else None
         res, fm = evaluate_full(img, ref, chart=chart, rois=rois, pixel_pitch=pixel_pitch,
                                 progress=True)
-        if out is None:
-            out = result.parent / f"{result.stem}_evaluation"
         res["inputs"] = {"result": str(result), "truth": None if truth is None else str(truth)}
-        written = write_evaluation(out, res, fm, image=img, truth=ref)
+        staged = StagedFolder(out, OUTPUT_FILES)  # the folder appears complete, or not at all
+        written = write_evaluation(staged.path, res, fm, image=img, truth=ref)
+        staged.commit()
         typer.echo((out / "evaluation.txt").read_text().rstrip())
         typer.echo(f"wrote {len(written)} files to {out}")

@@ -140,6 +140,10 @@ def _summary_text(result: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
+OUTPUT_FILES = ("evaluation.json", "evaluation.txt", "evaluation.csv", "mtf_curves.png",
+                "mtf50_field.png", "images.png", "difference.png")  # write_evaluation's files
+
+
 def write_evaluation(out_dir: str | Path, result: dict, fm: FieldMTF | None = None, *,
                      image=None, truth=None, name: str = "evaluation") -> list[Path]:
     """Write ``<name>.json``, ``<name>.csv`` (per-ROI table), ``<name>.txt`` (summary) and the

@@ -74,7 +74,7 @@ def register(app: typer.Typer) -> None:
         """
         import numpy as np
 
-        from metasensor.io.atomic import refuse_overwrite
+        from metasensor.io.guard import guard
         from metasensor.io.views import (
             read_config_from_views,
             read_views,
@@ -83,7 +83,7 @@ def register(app: typer.Typer) -> None:
         )
         from metasensor.motion.correct import correct_motion_views
 
-        refuse_overwrite([out], [views])
+        guard([views], [out, out.with_suffix(".png")])
         cfg = read_config_from_views(views) if Path(views).exists() else None
         stack = np.asarray(read_views(views))
         if period < 0:

@@ -30,16 +30,15 @@ def register(app: typer.Typer) -> None:
         Example: metasensor psf --config cfg.toml --zernike "4:0.5,7:-0.2" --out psf.h5
         """
         from metasensor.config import SystemConfig
+        from metasensor.io.guard import guard, npy_argument
         from metasensor.optics.psf import view_psfs
         from metasensor.optics.psf_io import parse_zernike, plot_views, save_psf
 
+        guard([config, npy_argument(zernike)], [out, png or out.with_suffix(".png")])
         cfg = SystemConfig.from_toml(config)
         z = parse_zernike(zernike)
         if out.suffix.lower() not in (".h5", ".hdf5"):
             raise ValueError(f"--out must end in .h5 or .hdf5, got {out.name!r}")
-        from metasensor.io.atomic import refuse_overwrite
-
-        refuse_overwrite([out, png], [config])
         bank = view_psfs(cfg, z, depth, subsample=subsample, size=size or None, device=device)
         save_psf(out, bank, cfg, zernike=z, depth=depth, subsample=subsample)
         fig = plot_views(bank, cfg, png or out.with_suffix(".png"), subsample=subsample)

@@ -3,8 +3,6 @@
 from __future__ import annotations
 
 import json
-import os
-import shutil
 from pathlib import Path
 
 import numpy as np
@@ -76,6 +74,7 @@ def write_outputs(out: Path, rec, views, origin=None) -> list[Path]:
     return [out / n for n in ("image.tif", "zernike.npy", "summary.json", "reconstruction.png")]
 
 
+RESULT_FILES = ("image.tif", "image.zarr", "zernike.npy", "summary.json", "reconstruction.png")
 PREVIEW_PX = 2048  # longest side of the images drawn in reconstruction.png
 
 
@@ -206,11 +205,11 @@ def register(app: typer.Typer) -> None:
                              "would be ignored; give the aberration or the bank, not both")
         if not views.exists():
             raise FileNotFoundError(f"view stack not found: {views}")
-        from metasensor.io.atomic import refuse_overwrite
+        from metasensor.io.atomic import StagedFolder
+        from metasensor.io.guard import guard, npy_argument
 
-        refuse_overwrite([out, *(out / n for n in ("image.tif", "image.zarr", "zernike.npy",
-                                                   "summary.json", "reconstruction.png"))],
-                         [views, psf, config, field_zernike, system])
+        guard([views, psf, config, field_zernike, system, npy_argument(zernike)],
+              [out / n for n in RESULT_FILES], folders=[out])
         bank = None
         cfg = None
         if psf is not None:
@@ -251,11 +250,8 @@ def register(app: typer.Typer) -> None:
 
             d = cfg.scan_step_px
             shape = (stack.shape[2] * d, stack.shape[3] * d)
-            out.mkdir(parents=True, exist_ok=True)
-            # stitched under a temporary name, renamed once complete (a crash or a bad argument
-            # leaves no partial image.zarr)
-            partial = out / ".image.zarr.partial"
-            shutil.rmtree(partial, ignore_errors=True)
+            staged = StagedFolder(out, RESULT_FILES)  # complete, or not at all
+            partial = staged.path / "image.zarr"
             target = zarr.open_array(str(partial), mode="w", shape=shape,
                                      chunks=(min(1024, shape[0]), min(1024, shape[1])),
                                      dtype="f4", fill_value=0.0)
@@ -267,27 +263,24 @@ def register(app: typer.Typer) -> None:
                               register=register_views, view_radius=view_radius)
         except BaseException:
             if target is not None:
-                shutil.rmtree(partial, ignore_errors=True)
+                staged.discard()
             raise
         if target is not None:
             from metasensor.io.views import description
 
             target.attrs.update(description(cfg, **image_meta(rec, origin)))
-            final = out / "image.zarr"
-            shutil.rmtree(final, ignore_errors=True)
-            os.replace(partial, final)
-            import zarr
-
-            rec.image = zarr.open_array(str(final), mode="r")
-        elif (out / "image.zarr").is_dir():  # an earlier --zarr run's image: not this one
-            shutil.rmtree(out / "image.zarr")
-            typer.echo(f"removed {out / 'image.zarr'} of an earlier run", err=True)
+        else:
+            staged = StagedFolder(out, RESULT_FILES)  # an earlier run's image.zarr goes
         if psf is not None:  # record the aberration the given bank was made with, if stored
             z = np.asarray(psf_attrs.get("zernike", ()), dtype=np.float64).ravel()
             if z.size and np.isfinite(z).all():
                 rec.zernike = np.zeros(rec.zernike.shape[:2] + (z.size,), np.float32) + z
-        written = write_outputs(out, rec, stack, origin)
+        written = [out / p.name for p in write_outputs(staged.path, rec, stack, origin)]
+        staged.commit()
         if target is not None:
+            import zarr
+
+            rec.image = zarr.open_array(str(out / "image.zarr"), mode="r")
             written.insert(1, out / "image.zarr")
         if rec.registration_zernike is not None:
             applied = np.any(rec.registration_zernike != 0, axis=-1)

@@ -51,9 +51,9 @@ def register(app: typer.Typer) -> None:
 
         if not capture.exists():
             raise FileNotFoundError(f"capture not found: {capture}")
-        from metasensor.io.atomic import refuse_overwrite
+        from metasensor.io.guard import guard
 
-        refuse_overwrite([out, out.with_suffix(".png") if figure else None], [capture, config])
+        guard([capture, config], [out, out.with_suffix(".png") if figure else None])
         if iterations < 1:
             raise ValueError(f"--iterations must be >= 1, got {iterations}")
         if not 0.0 < threshold < 1.0:

@@ -57,10 +57,10 @@ def calibrate_cmd(
     from metasensor.sensor.calibrate import calibrate, flat_field
 
     cfg = _config(config, scan)
-    from metasensor.io.atomic import refuse_overwrite
+    from metasensor.io.guard import guard
 
     flat_path = out.parent / out.with_suffix(".flat.tif").name if flat else None
-    refuse_overwrite([out, figure, flat_path], [white, config])
+    guard([white, config], [out, figure, flat_path])
     with open_raw(white) as raw:
         pages = len(raw)
         period = cfg.scan if scan is not None else (int(round(pages**0.5)) if pages > 1 else 1)
@@ -140,12 +140,12 @@ def realign_cmd(
         raise ValueError(f"--offsets must be measure, calib or nominal, got {offsets!r}")
     if out.suffix.lower() not in (".tif", ".tiff", ".zarr"):
         raise ValueError(f"--out must end in .tif, .tiff or .zarr: {out}")
-    from metasensor.io.atomic import refuse_overwrite
+    from metasensor.io.guard import guard
 
-    refuse_overwrite([out], [raw_path])
+    guard([raw_path, config, calib_path], [out], lock=False)
+    calib = Calibration.from_toml(calib_path) if calib_path is not None else None
     cfg, phases, moving = _stored_settings(raw_path, config, scan, order, moving)
     tp = len(phases)
-    calib = Calibration.from_toml(calib_path) if calib_path is not None else None
     with open_raw(raw_path) as raw:
         n_frames = len(raw)
         if n_frames < tp:
@@ -154,6 +154,10 @@ def realign_cmd(
         if not sliding and n_frames % tp:
             raise ValueError(f"{raw_path}: frame count {n_frames} is not a multiple of the "
                              f"{cfg.scan}x{cfg.scan} scan ({tp}); use --sliding for a window")
+        n_out = n_frames - tp + 1 if sliding else n_frames // tp
+        names = [out] if n_out == 1 else [out.with_name(f"{out.stem}_{k:05d}{out.suffix}")
+                                          for k in range(n_out)]
+        guard([raw_path, config, calib_path, _flat_input(calib, calib_path)], names)
         stream = tqdm(raw, total=n_frames, desc="realign", unit="frame")
         if calib is not None:
             from metasensor.sensor.calibrate import adapt
@@ -189,7 +193,7 @@ def realign_cmd(
                     np.float32)
             elif dtype == "float32" and views.dtype != np.float32:
                 views = views.astype(np.float32)  # exact for raw data up to 24 bits
-            path = out if n_out == 1 else out.with_name(f"{out.stem}_{k:05d}{out.suffix}")
+            path = names[k]
             # the phases in the order this stack's frames were taken (what motion correction
             # needs): window k starts at frame k (sliding) or k·T, i.e. at phase index
             # (start + k) % T or start % T of the scan order
@@ -280,6 +284,11 @@ def _calibration_figure(frame: np.ndarray, calib, path: Path) -> None:
     with atomic_path(path) as tmp:
         fig.savefig(tmp, dpi=100, format="png")
     plt.close(fig)
+
+
+def _flat_input(calib, calib_path):
+    """The flat-field map a calibration names (an input of realign --flat), or None."""
+    return calib.flat_path(calib_path) if calib is not None and calib.flat else None
 
 
 def _flat(calib, calib_path, cfg):

@@ -133,16 +133,15 @@ def register(app: typer.Typer) -> None:
         import numpy as np
 
         from metasensor.config import SystemConfig
-        from metasensor.io.atomic import refuse_overwrite
+        from metasensor.io.atomic import StagedFolder
+        from metasensor.io.guard import guard, npy_argument
         from metasensor.simulation.capture import simulate
         from metasensor.simulation.lens import SingleLens
         from metasensor.simulation.scenes import load_scene
 
         # the capture files written (or removed as stale) must not be what this run reads
-        refuse_overwrite([out / name for name in CAPTURE_FILES],
-                         [Path(scene), config,
-                          Path(zernike.strip()) if zernike.strip().lower().endswith(".npy")
-                          else None])
+        guard([Path(scene), config, npy_argument(zernike)],
+              [out / name for name in CAPTURE_FILES], folders=[out])
         cfg = SystemConfig.from_toml(config) if config is not None else SystemConfig()
         if size < 8:
             raise ValueError(f"--size must be at least 8, got {size}")
@@ -163,6 +162,8 @@ def register(app: typer.Typer) -> None:
         cap = simulate(img, cfg, zernike=z, field_zernike=field, scan=scan, scan_order=order,
                        snr_db=snr, seed=seed, photons=photons, read_noise=read_noise,
                        bit_depth=bits, device=device, progress=True)
-        files = write_capture(cap, out, clean=clean)
+        staged = StagedFolder(out, CAPTURE_FILES)  # the folder appears complete, or not at all
+        files = write_capture(cap, staged.path, clean=clean)
+        staged.commit()
         typer.echo(f"wrote {len(files)} files to {out} (SNR {cap.snr_db:.2f} dB, "
                    f"views {cap.views.shape}, frames {cap.frames.shape})")

@@ -1,0 +1,185 @@
+"""What every command checks before it reads or writes: its outputs never replace an input or
+each other, its inputs are regular files (or Zarr folders), and no other run writes the same
+output at the same time.
+
+:func:`guard` is the one call a command makes with the paths it reads and the paths it will
+write (generated names, figures and side files included). Paths compare by their real location
+(symbolic links followed, hard links by inode); an output also conflicts with an input inside it
+(a folder it replaces) or around it (a file written into an input store). Outputs are locked
+(``fcntl.flock`` on a hidden ``.<name>.lock`` beside each) until the command ends, so a second
+run writing the same output fails at once with one line instead of interleaving with the first.
+Hand-written: no library offers this set of checks.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import errno
+import os
+import stat
+from collections.abc import Iterable
+from pathlib import Path
+
+from metasensor.io.atomic import _on_exit, command_context, is_own_zarr, sibling_name
+
+__all__ = ["guard", "npy_argument", "OutputLocked"]
+
+_held: list[tuple[int, Path]] = []
+
+
+class OutputLocked(ValueError):
+    """Another run is writing the same output (one line naming it)."""
+
+
+def npy_argument(text: str | os.PathLike | None) -> Path | None:
+    """The file of an option that takes either inline values or a ``.npy`` path (``--zernike``),
+    or ``None`` when it names no file."""
+    if text is None:
+        return None
+    s = str(text).strip()
+    return Path(s) if s.lower().endswith(".npy") else None
+
+
+def _real(p: Path) -> Path:
+    return Path(os.path.realpath(os.path.abspath(p)))
+
+
+def _same(a: Path, b: Path) -> bool:
+    if _real(a) == _real(b):
+        return True
+    try:  # hard links: the same inode under two names
+        return os.path.samefile(a, b)
+    except OSError:
+        return False
+
+
+def _within(inner: Path, outer: Path) -> bool:
+    """``inner`` lies inside folder ``outer`` (by real path)."""
+    try:
+        _real(inner).relative_to(_real(outer))
+    except ValueError:
+        return False
+    return _real(inner) != _real(outer)
+
+
+def _check_input(p: Path) -> None:
+    try:
+        mode = os.stat(p).st_mode
+    except OSError:
+        return  # missing: the command names it in its own words
+    if not (stat.S_ISREG(mode) or stat.S_ISDIR(mode)):
+        raise ValueError(f"input {p} is not a regular file (a named pipe, socket or device): "
+                         "refused, reading it could block forever")
+
+
+def _check_output(p: Path, store: bool) -> None:
+    try:
+        st = os.lstat(p)
+    except OSError:
+        return
+    mode = os.stat(p).st_mode if stat.S_ISLNK(st.st_mode) and p.exists() else st.st_mode
+    if store or p.suffix.lower() == ".zarr":
+        if stat.S_ISDIR(mode) and not is_own_zarr(p):
+            raise ValueError(f"output {p} exists and is not a Zarr store written by metasensor: "
+                             "not replaced (move it away or choose another name)")
+        if not stat.S_ISDIR(mode) and stat.S_ISREG(mode):
+            raise ValueError(f"output {p} exists and is a file, not a Zarr store: not replaced")
+    if not (stat.S_ISREG(mode) or stat.S_ISDIR(mode)):
+        raise ValueError(f"output {p} exists and is not a regular file (a named pipe, socket "
+                         "or device): not replaced")
+
+
+def guard(inputs: Iterable, outputs: Iterable, *, folders: Iterable = (),
+          lock: bool = True) -> None:
+    """Refuse (one-line ``ValueError``) a command whose outputs would replace its inputs.
+
+    Parameters
+    ----------
+    inputs : iterable of path or None
+        Everything the command reads (files, Zarr stores); ``None`` entries are skipped. An
+        existing input that is not a regular file or folder (a named pipe) is refused.
+    outputs : iterable of path or None
+        Every file or store the command writes or replaces, generated names included. Two
+        outputs naming the same file, an output that is an input, lies inside an input folder
+        or contains an input, and an existing ``.zarr`` folder that is not a metasensor store,
+        are refused.
+    folders : iterable of path or None
+        Result folders the command writes into (their files belong in ``outputs``): refused when
+        one is an input or a file; locked like the outputs.
+    lock : bool
+        Hold a lock on every output until the command ends (:class:`OutputLocked` if another
+        run holds one); only inside a command (a click context), not from the API.
+    """
+    ins = [Path(p) for p in inputs if p is not None]
+    outs = [Path(p) for p in outputs if p is not None]
+    dirs = [Path(p) for p in folders if p is not None]
+    for p in ins:
+        _check_input(p)
+    for i, out in enumerate(outs):
+        for other in outs[:i]:
+            if _same(out, other):
+                raise ValueError(f"two outputs of this command are the same file: {other} and "
+                                 f"{out}")
+        for inp in ins:
+            if _same(out, inp) or _within(out, inp) or _within(inp, out):
+                raise ValueError(f"output {out} would overwrite the input {inp}")
+        _check_output(out, store=False)
+    for d in dirs:
+        if d.exists() and not d.is_dir():
+            raise ValueError(f"output folder {d} exists and is not a folder")
+        for inp in ins:
+            if _same(d, inp) or _within(d, inp):
+                raise ValueError(f"output {d} would overwrite the input {inp}")
+    if lock and command_context() is not None:
+        _lock_all([*dirs, *(o for o in outs if not any(_within(o, d) for d in dirs))])
+
+
+def _lock_all(paths: list[Path]) -> None:
+    taken = []
+    try:
+        for p in paths:
+            taken.append(_lock(p))
+    except BaseException:
+        for item in taken:
+            _release(item)
+        raise
+    _held.extend(taken)
+    _on_exit(lambda: [_release(t) for t in taken if t in _held])  # however the command ends
+
+
+def _lock(p: Path) -> tuple[int, Path]:
+    """Take ``.<name>.lock`` beside ``p`` (created, and removed on release)."""
+    import fcntl
+
+    p = Path(os.path.abspath(p))
+    p.parent.mkdir(parents=True, exist_ok=True)
+    lock = p.parent / sibling_name(p, "lock", pid=False)
+    for _ in range(20):
+        fd = os.open(lock, os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError as exc:
+            os.close(fd)
+            if exc.errno not in (errno.EAGAIN, errno.EACCES):
+                raise
+            raise OutputLocked(f"another metasensor run is writing {p} (lock {lock.name}); "
+                               "wait for it to finish or choose another output") from None
+        try:  # the holder before us may have removed the file it locked: lock the new one
+            if os.fstat(fd).st_ino == os.stat(lock).st_ino:
+                os.ftruncate(fd, 0)
+                os.write(fd, f"{os.getpid()}\n".encode())
+                return fd, lock
+        except FileNotFoundError:
+            pass
+        os.close(fd)
+    raise OutputLocked(f"cannot lock {lock}: it keeps being replaced")  # pragma: no cover
+
+
+def _release(item: tuple[int, Path]) -> None:
+    fd, lock = item
+    if item in _held:
+        _held.remove(item)
+    with contextlib.suppress(OSError):
+        lock.unlink()  # still ours: unlinked before the lock is let go
+    with contextlib.suppress(OSError):
+        os.close(fd)

@@ -1,0 +1,46 @@
+"""Run the ``metasensor`` entry point in this process (exit status and stderr as a user sees
+them, without a new interpreter's start-up) and fingerprint files and folders."""
+
+from __future__ import annotations
+
+import hashlib
+import io
+import sys
+from contextlib import redirect_stderr, redirect_stdout
+from pathlib import Path
+
+
+def run_cli(*args) -> tuple[int, str]:
+    """(exit status, stderr) of ``metasensor ARGS`` run through :func:`metasensor.cli.main`."""
+    from metasensor.cli import main
+
+    err, out = io.StringIO(), io.StringIO()
+    argv = sys.argv
+    sys.argv = ["metasensor", *map(str, args)]
+    try:
+        with redirect_stderr(err), redirect_stdout(out):
+            main()
+        code = 0
+    except SystemExit as exc:
+        code = exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 1)
+    finally:
+        sys.argv = argv
+    return code, err.getvalue()
+
+
+def refused(*args, match: str) -> str:
+    """Assert ``metasensor ARGS`` exits 2 with one ``error:`` line containing ``match``."""
+    code, err = run_cli(*args)
+    lines = err.strip().splitlines()
+    assert code == 2, (args, code, err)
+    assert len(lines) == 1 and lines[0].startswith("error:") and match in lines[0], (args, err)
+    return lines[0]
+
+
+def tree_digest(root: Path) -> dict[str, str]:
+    """sha256 of every file under ``root`` (or of ``root`` itself), by relative path."""
+    root = Path(root)
+    if root.is_file():
+        return {".": hashlib.sha256(root.read_bytes()).hexdigest()}
+    return {str(p.relative_to(root)): hashlib.sha256(p.read_bytes()).hexdigest()
+            for p in sorted(root.rglob("*")) if p.is_file()}
