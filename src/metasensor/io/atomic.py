@@ -87,17 +87,19 @@ def remove_stale(path: str | Path) -> list[Path]:
 
 
 def write_error(path: str | Path, exc: OSError) -> OSError:
-    """One line naming the file asked for (not a temporary) and the cause."""
-    if exc.errno in (errno.ENOSPC, errno.EDQUOT):
-        return OSError(exc.errno, f"cannot write {path}: no space left on the device")
-    if exc.errno == errno.EFBIG:
-        return OSError(exc.errno, f"cannot write {path}: file too large for the device or the "
-                                  "file-size limit")
-    if exc.errno is None:  # a writer's own message, e.g. tifffile's "N requested and M written"
-        with contextlib.suppress(OSError):
-            if shutil.disk_usage(Path(path).parent).free < 2**20:
-                return OSError(errno.ENOSPC, f"cannot write {path}: no space left on the device")
-    return OSError(exc.errno, f"cannot write {path}: {exc.strerror or exc}")
+    """One line naming the file asked for (not a temporary) and the cause (``errno`` kept)."""
+    code, cause = exc.errno, exc.strerror or str(exc)
+    if code in (errno.ENOSPC, errno.EDQUOT):
+        cause = "no space left on the device"
+    elif code == errno.EFBIG:
+        cause = "file too large for the device or the file-size limit"
+    elif code is None and "written" in cause:  # a short write (tifffile: "N requested and M
+        # written"): the disk filled up or the file reached the file-size limit
+        code = errno.ENOSPC
+        cause = f"the disk is full or the file-size limit is reached ({cause})"
+    out = OSError(f"cannot write {path}: {' '.join(str(cause).split())}")
+    out.errno = code
+    return out
 
 
 def _umask_mode(p: Path) -> None:

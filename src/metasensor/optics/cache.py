@@ -3,7 +3,9 @@
 Location: the environment variable ``METASENSOR_CACHE`` if set, else the folder given to
 :func:`set_cache_dir`, else ``~/.cache/metasensor``. Entries are ``.npy`` files written to a
 temporary name in the same folder and renamed with ``os.replace`` (atomic), so concurrent
-writers and readers never see a partial file; a corrupt entry counts as a miss and is removed.
+writers and readers never see a partial file (two writers of one key write the same bytes; the
+last rename wins); a corrupt entry counts as a miss and is removed. A cache folder that cannot
+be written (read-only, full) only costs the caching: the computation goes on.
 ``stats`` counts hits and misses in this process (for tests and benchmarks).
 
 Size: the folder is kept under ``METASENSOR_CACHE_MAX_GB`` GiB (default
@@ -115,7 +117,9 @@ def load(key: str, folder: Path | None = None) -> np.ndarray | None:
     if path.is_file():
         try:
             arr = np.load(path, allow_pickle=False)
-        except (OSError, ValueError):
+            if not np.isfinite(arr).all():  # damaged in place: a miss, recomputed
+                raise ValueError("non-finite entry")
+        except (OSError, ValueError, EOFError):
             with contextlib.suppress(OSError):
                 path.unlink()
         else:
@@ -141,9 +145,11 @@ def store(key: str, array: np.ndarray, folder: Path | None = None) -> Path | Non
         with os.fdopen(fd, "wb") as fh:
             np.save(fh, np.ascontiguousarray(array), allow_pickle=False)
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as exc:
         with contextlib.suppress(OSError):
             os.unlink(tmp)
+        if isinstance(exc, OSError):  # a full cache folder never breaks the computation
+            return None
         raise
     if limit != float("inf"):
         _evict(path.parent, path, limit)

@@ -69,21 +69,20 @@ def parse_zernike(text: str | None) -> np.ndarray | None:
 def save_psf(path: str | Path, psf: np.ndarray, cfg: SystemConfig, zernike=None,
              depth: float = 0.0, subsample: int = 1) -> Path:
     """Write a bank ``(nnum, nnum, K, K)`` to HDF5 atomically; returns the path."""
-    import h5py
-
     psf = np.asarray(psf, dtype=np.float32)
     if psf.ndim != 4 or psf.shape[:2] != (cfg.nnum, cfg.nnum):
         raise ValueError(f"psf must have shape (nnum, nnum, K, K), got {psf.shape}")
     path = Path(path)
-    with atomic_path(path) as tmp:
-        with h5py.File(tmp, "w") as f:
-            f.create_dataset("psf", data=psf, compression="gzip", compression_opts=4)
-            f.attrs["config"] = cfg.to_json()
-            f.attrs["zernike"] = np.zeros(0) if zernike is None else np.asarray(zernike, float)
-            f.attrs["depth"] = float(depth)
-            f.attrs["subsample"] = int(subsample)
-            f.attrs["pixel_pitch"] = cfg.pixel_pitch
-            f.attrs["axes"] = "u,v,y,x"
+    from metasensor.io.h5 import atomic_h5
+
+    with atomic_h5(path) as f:  # a full disk: one line naming the file, never a crash
+        f.create_dataset("psf", data=psf, compression="gzip", compression_opts=4)
+        f.attrs["config"] = cfg.to_json()
+        f.attrs["zernike"] = np.zeros(0) if zernike is None else np.asarray(zernike, float)
+        f.attrs["depth"] = float(depth)
+        f.attrs["subsample"] = int(subsample)
+        f.attrs["pixel_pitch"] = cfg.pixel_pitch
+        f.attrs["axes"] = "u,v,y,x"
     return path
 
 
@@ -95,8 +94,10 @@ def load_psf(path: str | Path, with_attrs: bool = False):
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"PSF file not found: {path}")
+    from metasensor.io.h5 import h5_errors
+
     try:
-        with h5py.File(path, "r") as f:
+        with h5_errors(path, "HDF5 PSF file"), h5py.File(path, "r") as f:
             if "psf" not in f:
                 raise ValueError(f"{path}: no dataset 'psf' (not a metasensor PSF file)")
             psf = np.asarray(f["psf"], dtype=np.float32)
@@ -106,7 +107,11 @@ def load_psf(path: str | Path, with_attrs: bool = False):
         raise ValueError(f"{path}: not a readable HDF5 file ({exc})") from None
     except (KeyError, ConfigError) as exc:
         raise ValueError(f"{path}: missing or corrupt config attribute ({exc})") from None
-    if psf.shape[:2] != (cfg.nnum, cfg.nnum):
+    sub = np.ravel(attrs.get("subsample", 1))
+    if sub.size != 1 or not np.issubdtype(sub.dtype, np.number) or not sub[0] >= 1:
+        raise ValueError(f"{path}: attribute 'subsample' must be one positive integer, got "
+                         f"{attrs.get('subsample')!r:.40}")
+    if psf.ndim != 4 or psf.shape[:2] != (cfg.nnum, cfg.nnum):
         raise ValueError(f"{path}: psf shape {psf.shape} does not match nnum {cfg.nnum}")
     return (psf, cfg, attrs) if with_attrs else (psf, cfg)
 

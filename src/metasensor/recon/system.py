@@ -76,12 +76,11 @@ class SystemAberration:
     def save(self, path: str | Path) -> Path:
         """Write HDF5 atomically (datasets zernike, shift_grid, pupils, residual_rms; the config
         and view shape as attributes)."""
-        import h5py
 
-        from metasensor.io.atomic import atomic_path
+        from metasensor.io.h5 import atomic_h5
 
         path = Path(path)
-        with atomic_path(path) as tmp, h5py.File(tmp, "w") as f:
+        with atomic_h5(path) as f:  # a full disk: one line naming the file, never a crash
             f.attrs["format"] = FORMAT
             f.attrs["config"] = self.config.to_json()
             f.attrs["view_shape"] = np.asarray(self.view_shape, dtype=np.int64)
@@ -101,11 +100,13 @@ class SystemAberration:
         path = Path(path)
         if not path.is_file():
             raise FileNotFoundError(f"system calibration not found: {path}")
+        from metasensor.io.h5 import h5_errors
+
         try:
             f = h5py.File(path, "r")
         except OSError as exc:
             raise ValueError(f"{path} is not a readable HDF5 file ({exc})") from None
-        with f:
+        with h5_errors(path, "system-aberration file"), f:
             if f.attrs.get("format") != FORMAT:
                 raise ValueError(f"{path} is not a metasensor system-aberration file")
             try:
