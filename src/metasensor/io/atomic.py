@@ -270,6 +270,10 @@ class StagedFolder:
             self.discard()
         except OSError as exc:
             raise write_error(out, exc) from None
+        finally:
+            import atexit
+
+            atexit.unregister(self.discard)  # if registered there: done with
         return out
 
 

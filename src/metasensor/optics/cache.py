@@ -20,7 +20,6 @@ from __future__ import annotations
 import contextlib
 import hashlib
 import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -136,9 +135,13 @@ def store(key: str, array: np.ndarray, folder: Path | None = None) -> Path | Non
     the size cap (:func:`max_bytes`); returns the path (``None`` if not writable)."""
     limit = max_bytes()
     path = _path(key, folder)
+    from metasensor.io.atomic import remove_stale, sibling_name
+
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(prefix=f".{key}.", suffix=".npy", dir=path.parent)
+        remove_stale(path)  # what a killed writer of this key left
+        tmp = path.parent / sibling_name(path, "tmp", suffix=".npy")  # unique: pid + random
+        fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)
     except OSError:
         return None  # an unwritable cache never breaks the computation
     try:
