@@ -19,6 +19,13 @@ from typing import Any
 __all__ = ["SystemConfig", "ConfigError"]
 
 _APERTURES = ("circular", "square")
+# physically meaningful ranges (lengths in metres): optical wavelengths from the UV to the
+# thermal IR, microlens arrays from 1 µm to 10 mm pitch; values outside make the wave-optics
+# grids explode or vanish (an all-zero PSF bank) rather than describe a sensor
+RANGES = {"mla_pitch": (1e-6, 1e-2), "mla_focal": (1e-6, 1.0), "wavelength": (1e-7, 2e-5),
+          "magnification": (1e-6, 1e6)}
+MAX_NNUM = 63  # pixels per lenslet (the prototype: 15)
+MAX_NA = 0.95  # image-side numerical aperture (the prototype: 0.05)
 
 
 class ConfigError(ValueError):
@@ -90,27 +97,37 @@ class SystemConfig:
     def validate(self) -> None:
         """Raise :class:`ConfigError` naming the first impossible parameter."""
 
-        def positive(name: str) -> None:
+        def positive(name: str, lo: float = 0.0, hi: float = math.inf, unit: str = "") -> None:
             value = getattr(self, name)
             if not isinstance(value, (int, float)) or isinstance(value, bool):
-                raise ConfigError(f"{name} must be a number, got {value!r}")
-            if not math.isfinite(value) or value <= 0:
-                raise ConfigError(f"{name} must be positive and finite, got {value!r}")
+                raise ConfigError(f"{name} must be a number, got {value!r:.40}")
+            try:
+                finite = math.isfinite(value)
+            except OverflowError:  # an int beyond any float
+                finite = False
+            if not finite or value <= 0:
+                raise ConfigError(f"{name} must be positive and finite, got {value!r:.40}")
+            if not lo <= value <= hi:  # physically meaningful (and computable) values only
+                raise ConfigError(f"{name} must lie in [{lo:g}, {hi:g}]{unit}, got {value!r}")
 
         if not isinstance(self.nnum, int) or isinstance(self.nnum, bool):
             raise ConfigError(f"nnum must be an integer, got {self.nnum!r}")
         if self.nnum < 3 or self.nnum % 2 == 0:
             raise ConfigError(f"nnum must be odd and >= 3, got {self.nnum}")
-        for name in ("mla_pitch", "mla_focal", "wavelength", "magnification"):
-            positive(name)
-        if not (isinstance(self.na, (int, float)) and 0.0 < self.na < 1.0):
-            raise ConfigError(f"na must lie in (0, 1), got {self.na!r}")
+        if self.nnum > MAX_NNUM:
+            raise ConfigError(f"nnum must be at most {MAX_NNUM} pixels per lenslet, got "
+                              f"{self.nnum}")
+        for name, (lo, hi) in RANGES.items():
+            positive(name, lo, hi, " m" if name != "magnification" else "")
+        if not (isinstance(self.na, (int, float)) and 0.0 < self.na <= MAX_NA):
+            raise ConfigError(f"na must lie in (0, {MAX_NA}], got {self.na!r:.40}")
         if self.lenslet_aperture not in _APERTURES:
             raise ConfigError(
                 f"lenslet_aperture must be one of {_APERTURES}, got {self.lenslet_aperture!r}"
             )
         if self.aperture_diameter is not None:
-            positive("aperture_diameter")
+            positive("aperture_diameter", self.mla_pitch / 100, math.inf, " m (1 % of the pitch "
+                     "upwards)")
             if self.aperture_diameter > self.mla_pitch * math.sqrt(2) + 1e-12:
                 raise ConfigError(
                     f"aperture_diameter {self.aperture_diameter!r} exceeds the lenslet's diagonal"
@@ -258,6 +275,8 @@ class SystemConfig:
             data = json.loads(text)
         except json.JSONDecodeError as exc:
             raise ConfigError(f"invalid JSON configuration: {exc}") from None
+        except RecursionError:  # nested thousands deep: no configuration
+            raise ConfigError("invalid JSON configuration: nested too deeply") from None
         if not isinstance(data, dict):
             raise ConfigError(f"JSON configuration must be an object, got {type(data).__name__}")
         return cls.from_dict(data)
@@ -276,6 +295,8 @@ class SystemConfig:
             data = tomllib.loads(text)
         except tomllib.TOMLDecodeError as exc:
             raise ConfigError(f"invalid TOML: {exc}") from None
+        except RecursionError:  # nested thousands deep: no configuration
+            raise ConfigError("invalid TOML: nested too deeply") from None
         table = data.get("system", data)
         if not isinstance(table, dict):
             raise ConfigError(f"'system' must be a TOML table, got {table!r:.40}")

@@ -195,7 +195,7 @@ def is_own_zarr(path: str | Path) -> bool:
             attrs = json.loads((path / "zarr.json").read_text()).get("attributes", {})
         else:
             attrs = json.loads((path / ".zattrs").read_text())
-    except (OSError, ValueError, AttributeError):
+    except (OSError, ValueError, AttributeError, RecursionError):
         return False
     return isinstance(attrs, dict) and "metasensor" in attrs
 

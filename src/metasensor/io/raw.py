@@ -8,6 +8,7 @@ file is opened read-only and never modified.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -37,7 +38,7 @@ class RawFrames:
                 raise ValueError(f"raw frames must be (T, H, W), got shape {source.shape}")
             self._mm = source
             self.shape = tuple(int(s) for s in source.shape)
-            self.dtype = source.dtype
+            self.dtype = source.dtype.newbyteorder("=")
             return
         self.path = Path(source)
         self._open(mmap)
@@ -55,6 +56,13 @@ class RawFrames:
             shape = tuple(first.shape)
             if len(shape) != 2:
                 raise ValueError(f"{path}: frames must be 2-D greyscale pages, got {shape}")
+            if np.dtype(first.dtype).kind not in "buif":
+                raise ValueError(f"{path}: holds {first.dtype} frames; real numbers are expected")
+            from metasensor.io.tiff import available_memory
+
+            if math.prod(shape) * np.dtype(first.dtype).itemsize > available_memory():
+                raise ValueError(f"{path}: one frame declares {shape}, more than the memory "
+                                 "available")
             for k, page in enumerate(pages):
                 if tuple(page.shape) != shape or page.dtype != first.dtype:
                     raise ValueError(f"{path}: page {k} is {page.dtype} {page.shape}, unlike "
@@ -67,7 +75,7 @@ class RawFrames:
             raise ValueError(f"{path}: corrupt TIFF ({type(exc).__name__}: {exc})") from None
         self._pages = pages
         self.shape = (len(pages), *shape)
-        self.dtype = np.dtype(first.dtype)
+        self.dtype = np.dtype(first.dtype).newbyteorder("=")  # frames in native byte order
         series = tuple(tif.series[0].shape) if tif.series else ()
         if len(series) == 3 and series[1:] == shape and series[0] > len(pages):
             # one IFD for a contiguous series (tifffile truncate=True, ImageJ over 4 GB): the
@@ -99,12 +107,12 @@ class RawFrames:
         if not 0 <= t < len(self):
             raise IndexError(f"frame {t} out of range 0..{len(self) - 1}")
         if self._mm is not None:
-            return np.array(self._mm[t])
+            return np.array(self._mm[t], dtype=self.dtype)
         try:
             frame = self._pages[t].asarray()
         except Exception as exc:
             raise ValueError(f"{self.path}: cannot decode page {t} ({exc})") from None
-        return np.asarray(frame)
+        return np.asarray(frame, dtype=self.dtype)
 
     def __iter__(self) -> Iterator[np.ndarray]:
         for t in range(len(self)):

@@ -74,7 +74,7 @@ def _expected_pages(tif, first) -> int | None:
     page = tuple(int(s) for s in first.shape)
     try:
         meta = json.loads(first.description or "")
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, RecursionError):
         meta = None
     shape = None
     if isinstance(meta, dict):
@@ -157,6 +157,28 @@ def open_tiff(path: Path | str):
     return tif, pages
 
 
+def available_memory() -> int:
+    """Bytes of memory available to a new allocation (psutil's ``available``)."""
+    import psutil
+
+    return int(psutil.virtual_memory().available)
+
+
+def _check_series(tif, path: Path, decoded: bool) -> None:
+    """Refuse complex data, and (``decoded``) data whose declared size exceeds the memory
+    available, before a byte is decoded (a small compressed file can declare gigabytes)."""
+    if not tif.series:
+        return
+    series = tif.series[0]
+    dtype = np.dtype(series.dtype)
+    if dtype.kind not in "buif":
+        raise TiffReadError(f"{path}: holds {dtype} data; real numbers are expected")
+    need = math.prod(int(s) for s in series.shape) * dtype.itemsize
+    if decoded and need > available_memory():
+        raise TiffReadError(f"{path}: declares {need / 2**30:.1f} GiB of image data, more than "
+                            f"the {available_memory() / 2**30:.1f} GiB of memory available")
+
+
 def read_tiff(path: Path | str, *, mmap: bool = False) -> np.ndarray:
     """The first series of a TIFF as an array (what ``tifffile.imread`` returns), after
     :func:`checked_pages`; ``mmap`` maps uncompressed data instead of reading it. A truncated or
@@ -164,6 +186,7 @@ def read_tiff(path: Path | str, *, mmap: bool = False) -> np.ndarray:
     path = Path(path)
     tif, _ = open_tiff(path)
     try:
+        _check_series(tif, path, decoded=not mmap)
         with TiffWarnings() as warned:
             arr = tif.asarray(out="memmap") if mmap else tif.asarray()
     except Exception as exc:  # noqa: BLE001 - tifffile raises many types for corrupt files

@@ -31,10 +31,16 @@ def description(cfg: SystemConfig | None, **meta) -> dict:
     return out
 
 
-def _check_views(views: np.ndarray) -> np.ndarray:
+def _check_views(views: np.ndarray, cfg=None, extra=None) -> np.ndarray:
     views = np.asarray(views)
     if views.ndim != 4 or views.shape[0] != views.shape[1]:
         raise ValueError(f"views must have shape (nnum, nnum, H, W), got {views.shape}")
+    if views.dtype.kind not in "buif":
+        raise ValueError(f"views must be real numbers, got dtype {views.dtype}")
+    if cfg is not None and not isinstance(cfg, SystemConfig):
+        raise TypeError(f"cfg must be a SystemConfig or None, got {type(cfg).__name__}")
+    if extra is not None and not isinstance(extra, dict):
+        raise TypeError(f"extra must be a dict or None, got {type(extra).__name__}")
     return views
 
 
@@ -43,7 +49,7 @@ def write_views(path: str | Path, views: np.ndarray, cfg: SystemConfig | None = 
     """Write a view stack ``(nnum, nnum, H, W)`` to ``.tif``/``.tiff`` or ``.zarr`` atomically."""
     import tifffile
 
-    views = _check_views(views)
+    views = _check_views(views, cfg, extra)
     path = Path(path)
     meta = description(cfg, kind="views", view_shape=list(views.shape), **(extra or {}))
     n = views.shape[0]
@@ -119,8 +125,12 @@ def read_views(path: str | Path, nnum: int | None = None, mmap: bool = False) ->
         arr = _open_zarr(path)
         if arr.ndim != 4:
             raise ValueError(f"{path}: expected a 4-D (nnum, nnum, H, W) array, got {arr.shape}")
-        return arr
+        _real_dtype(arr.dtype, path)
+        if arr.size and arr.nchunks_initialized == 0:
+            raise ValueError(f"{path}: the Zarr view store holds no data (every chunk missing)")
+        return CheckedZarr(arr, path)
     pages = read_tiff(path, mmap=mmap)  # not a TIFF, truncated or corrupt: one ValueError line
+    _real_dtype(pages.dtype, path)
     if pages.size == 0:
         raise ValueError(f"{path}: not a readable TIFF view stack (no image data)")
     if pages.ndim == 2:
@@ -133,6 +143,42 @@ def read_views(path: str | Path, nnum: int | None = None, mmap: bool = False) ->
     if nnum * nnum != pages.shape[0]:
         raise ValueError(f"{path}: {pages.shape[0]} pages is not nnum² for nnum = {nnum}")
     return pages.reshape(nnum, nnum, *pages.shape[1:])
+
+
+def _real_dtype(dtype, path: Path) -> None:
+    if np.dtype(dtype).kind not in "buif":
+        raise ValueError(f"{path}: views must be real numbers, got dtype {np.dtype(dtype)}")
+
+
+class CheckedZarr:
+    """A Zarr view store read lazily (``shape``, ``dtype``, slicing, ``np.asarray``) whose
+    damaged chunks are one ``ValueError`` line naming the store, not the codec's error."""
+
+    def __init__(self, array, path: Path) -> None:
+        self.array, self.path = array, Path(path)
+
+    def __getattr__(self, name):  # shape, dtype, ndim, attrs, chunks, ...
+        if name in ("array", "path"):
+            raise AttributeError(name)
+        return getattr(self.array, name)
+
+    def __len__(self) -> int:
+        return len(self.array)
+
+    def __getitem__(self, key):
+        try:
+            return self.array[key]
+        except (MemoryError, IndexError):
+            raise
+        except Exception as exc:  # noqa: BLE001 - codecs raise many types for damaged chunks
+            text = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
+            raise ValueError(f"{self.path}: damaged Zarr chunk ({text})") from None
+
+    def __array__(self, dtype=None, copy=None):
+        return np.asarray(self[...], dtype=dtype)
+
+    def __repr__(self) -> str:
+        return f"CheckedZarr({str(self.path)!r}, shape={self.array.shape})"
 
 
 def _stored_meta(path: Path) -> dict | None:
@@ -154,7 +200,7 @@ def _stored_meta(path: Path) -> dict | None:
             raise truncated(path, warned.messages[0])
         try:
             meta = json.loads(desc)
-        except json.JSONDecodeError:
+        except (json.JSONDecodeError, RecursionError):  # not JSON, or nested thousands deep
             return None
     return meta if isinstance(meta, dict) else None
 

@@ -22,6 +22,8 @@ def read_image(path: str | Path, what: str = "image") -> np.ndarray:
     except Exception as exc:  # noqa: BLE001 - any reader failure is a bad file
         raise ValueError(f"cannot read {what} {p}: {exc}".splitlines()[0]) from None
     arr = np.squeeze(np.asarray(arr))
+    if arr.dtype.kind not in "buif":
+        raise ValueError(f"{what} {p} must hold real numbers, got dtype {arr.dtype}")
     if arr.ndim != 2:
         raise ValueError(f"{what} {p} must hold one 2-D image, got shape {arr.shape}")
     return arr.astype(np.float32, copy=False)

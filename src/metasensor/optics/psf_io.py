@@ -20,10 +20,30 @@ __all__ = ["save_psf", "load_psf", "plot_views", "parse_zernike", "read_npy"]
 def read_npy(path: str | Path, what: str) -> np.ndarray:
     """A ``.npy`` array (no pickles); one ``ValueError`` line naming ``what`` and the file if it
     is empty, truncated or not a NumPy file."""
-    try:
-        return np.load(path, allow_pickle=False)
+    try:  # mapped first: a header declaring more data than the file holds fails here
+        arr = np.array(np.load(path, allow_pickle=False, mmap_mode="r"))
     except (OSError, ValueError, EOFError) as exc:  # EOFError: an empty file
-        raise ValueError(f"{what} {path}: not a readable .npy file ({exc or 'empty'})") from None
+        text = " ".join(str(exc).split()) or "empty"
+        raise ValueError(f"{what} {path}: not a readable .npy file ({text})") from None
+    if arr.dtype.kind not in "buif":
+        raise ValueError(f"{what} {path}: expected real numbers, got dtype {arr.dtype}")
+    return arr
+
+
+MAX_VIEW_SUM = 1e3  # a PSF view's sum (1 at most for a bank this package writes)
+MAX_NOLL = 231  # Noll indices up to radial order 20
+MAX_WAVES = 100.0  # |coefficient| in waves: beyond, the pupil sampling cannot follow
+
+
+def check_zernike(z: np.ndarray, what: str) -> np.ndarray:
+    """A Noll vector within :data:`MAX_NOLL` terms and :data:`MAX_WAVES` waves, or one
+    ``ValueError`` line naming ``what``."""
+    if z.shape[-1] > MAX_NOLL:
+        raise ValueError(f"{what}: {z.shape[-1]} Noll terms; at most {MAX_NOLL} are supported")
+    if z.size and np.abs(z).max() > MAX_WAVES:
+        raise ValueError(f"{what}: a coefficient of {np.abs(z).max():.3g} waves; at most "
+                         f"{MAX_WAVES:g} are meaningful")
+    return z
 
 
 def parse_zernike(text: str | None) -> np.ndarray | None:
@@ -40,7 +60,7 @@ def parse_zernike(text: str | None) -> np.ndarray | None:
         if z.ndim != 1 or z.size == 0 or not np.isfinite(z).all():
             raise ValueError(f"--zernike {path}: expected a finite 1-D Noll vector, got shape "
                              f"{z.shape}")
-        return np.asarray(z, dtype=np.float64)
+        return check_zernike(np.asarray(z, dtype=np.float64), f"--zernike {path}")
     coeffs: dict[int, float] = {}
     for item in text.split(","):
         item = item.strip()
@@ -53,8 +73,8 @@ def parse_zernike(text: str | None) -> np.ndarray | None:
             raise ValueError(
                 f"--zernike must look like '4:0.5,7:-0.2' (Noll index:waves), got {text!r}"
             ) from None
-        if j < 1:
-            raise ValueError(f"--zernike: Noll index must be >= 1, got {j}")
+        if not 1 <= j <= MAX_NOLL:
+            raise ValueError(f"--zernike: Noll index must lie in 1..{MAX_NOLL}, got {j}")
         if not np.isfinite(c):
             raise ValueError(f"--zernike: coefficient of mode {j} is not finite")
         coeffs[j] = c
@@ -63,7 +83,7 @@ def parse_zernike(text: str | None) -> np.ndarray | None:
     z = np.zeros(max(coeffs))
     for j, c in coeffs.items():
         z[j - 1] = c
-    return z
+    return check_zernike(z, "--zernike")
 
 
 def save_psf(path: str | Path, psf: np.ndarray, cfg: SystemConfig, zernike=None,
@@ -111,6 +131,10 @@ def load_psf(path: str | Path, with_attrs: bool = False):
     if sub.size != 1 or not np.issubdtype(sub.dtype, np.number) or not sub[0] >= 1:
         raise ValueError(f"{path}: attribute 'subsample' must be one positive integer, got "
                          f"{attrs.get('subsample')!r:.40}")
+    sums = psf.reshape(*psf.shape[:2], -1).sum(-1, dtype=np.float64) if psf.ndim == 4 else None
+    if sums is not None and not (np.isfinite(sums).all() and 0 < sums.max() <= MAX_VIEW_SUM):
+        raise ValueError(f"{path}: not a usable PSF bank (largest view sum {np.max(sums):.3g}; "
+                         f"a bank's views sum to at most 1, here {MAX_VIEW_SUM:g} is allowed)")
     if psf.ndim != 4 or psf.shape[:2] != (cfg.nnum, cfg.nnum):
         raise ValueError(f"{path}: psf shape {psf.shape} does not match nnum {cfg.nnum}")
     return (psf, cfg, attrs) if with_attrs else (psf, cfg)

@@ -200,6 +200,9 @@ def register(app: typer.Typer) -> None:
 
         if psf is not None and config is not None:
             raise ValueError("give either --psf or --config, not both")
+        if solver == "hqs" and (iterations is not None or subsets is not None):
+            raise ValueError("--iterations/--subsets set Richardson-Lucy's passes; --solver hqs "
+                             "takes neither (drop them, or use --solver rl)")
         if psf is not None and (zernike or field_zernike is not None or system is not None):
             raise ValueError("--psf is a complete PSF bank: --zernike/--field-zernike/--system "
                              "would be ignored; give the aberration or the bank, not both")

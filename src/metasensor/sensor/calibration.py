@@ -194,6 +194,8 @@ class Calibration:
             data = tomllib.loads(path.read_text()).get("calibration")
         except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
             raise ValueError(f"{path}: invalid calibration TOML ({exc})") from None
+        except RecursionError:
+            raise ValueError(f"{path}: invalid calibration TOML (nested too deeply)") from None
         if not isinstance(data, dict):
             raise ValueError(f"{path}: no [calibration] table")
         names = {f.name for f in dataclasses.fields(cls)}

@@ -52,6 +52,11 @@ def lenslet_counts(frame_shape: tuple[int, int], cfg: SystemConfig, moving: str 
     return ly, lx
 
 
+def _native(a: np.ndarray) -> np.ndarray:
+    """``a`` in this machine's byte order (big-endian TIFFs, ImageJ's default, read as such)."""
+    return a if a.dtype.isnative else a.astype(a.dtype.newbyteorder("="))
+
+
 def _check_dtype(dtype: np.dtype, what: str = "frames") -> None:
     if np.dtype(dtype) not in _DTYPES:
         raise TypeError(f"{what} must be an integer or float32/float64 array, got dtype {dtype}")
@@ -72,6 +77,7 @@ def _check_frames(frames, cfg: SystemConfig, period: int, margin: int) -> np.nda
         frames = np.asarray(frames)
     if frames.ndim != 3:
         raise ValueError(f"frames must be a (T, H, W) array, got shape {frames.shape}")
+    frames = _native(frames)
     _check_dtype(frames.dtype)
     t = frames.shape[0]
     if t != period * period:
@@ -215,7 +221,7 @@ def realign_sequence(frames: Iterable[np.ndarray], cfg: SystemConfig, scan_order
     state: np.ndarray | None = None
     count = 0
     for f, frame in enumerate(frames):
-        frame = np.asarray(frame)
+        frame = _native(np.asarray(frame))
         if frame.ndim != 2:
             raise ValueError(f"frame {f} must be a 2-D (H, W) array, got shape {frame.shape}")
         if ring is None:
