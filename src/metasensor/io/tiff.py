@@ -189,6 +189,8 @@ def read_tiff(path: Path | str, *, mmap: bool = False) -> np.ndarray:
         _check_series(tif, path, decoded=not mmap)
         with TiffWarnings() as warned:
             arr = tif.asarray(out="memmap") if mmap else tif.asarray()
+    except TiffReadError:
+        raise
     except Exception as exc:  # noqa: BLE001 - tifffile raises many types for corrupt files
         raise truncated(path, first_line(exc)) from None
     finally:

@@ -22,7 +22,9 @@ def read_npy(path: str | Path, what: str) -> np.ndarray:
     is empty, truncated or not a NumPy file."""
     try:  # mapped first: a header declaring more data than the file holds fails here
         arr = np.array(np.load(path, allow_pickle=False, mmap_mode="r"))
-    except (OSError, ValueError, EOFError) as exc:  # EOFError: an empty file
+    except MemoryError:
+        raise
+    except Exception as exc:  # noqa: BLE001 - a damaged header raises EOFError, TokenError...
         text = " ".join(str(exc).split()) or "empty"
         raise ValueError(f"{what} {path}: not a readable .npy file ({text})") from None
     if arr.dtype.kind not in "buif":
