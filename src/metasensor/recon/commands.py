@@ -177,7 +177,9 @@ def register(app: typer.Typer) -> None:
                                             "or a .npy Noll vector (simulate's wavefront.npy)"),
         field_zernike: Path | None = typer.Option(
             None, "--field-zernike", help=".npy (by, bx, J) Noll vectors over the field"),
-        scheduler: str | None = typer.Option(None, help="dask scheduler address tcp://host:port"),
+        scheduler: str | None = typer.Option(
+            None, help="dask scheduler address tcp://host:port (trusted: dask exchanges "
+            "pickles; use a private network or tls://)"),
         device: str | None = typer.Option(None, help="cpu or cuda (default: cuda if present)"),
         zarr_out: bool = typer.Option(False, "--zarr", help="also stitch into out/image.zarr "
                                       "block by block (large fields)"),
