@@ -1,28 +1,107 @@
 """The ``metasensor`` console command (typer). Each pipeline stage registers its own commands
-from ``metasensor.<stage>.commands.register(app)``; this file only assembles them."""
+from ``metasensor.<stage>.commands.register(app)``; this file only assembles them.
+
+A stage's module is imported only when one of its commands runs (or its ``--help`` is asked
+for): ``metasensor --help`` lists the commands from the table below without importing torch,
+so it answers in well under a second. ``tests/test_cli_startup.py`` checks that the table
+matches the commands each module registers.
+"""
 
 from __future__ import annotations
 
 import importlib
+from typing import Any
 
 import typer
+from typer.core import TyperGroup
+
+# command -> (module under metasensor that registers it, first paragraph of its help)
+_COMMANDS: dict[str, tuple[str, str]] = {
+    "psf": ("optics.commands", "Compute the phase-space PSF bank of every view and write it to "
+            "HDF5 plus a figure."),
+    "simulate": ("simulation.commands", "Simulate a raw meta-imaging capture with known truth "
+                 "and comparison sensors."),
+    "calibrate": ("sensor.commands", "Calibrate the lenslet grid (pitch, rotation, centre, flat "
+                  "field, scan offsets)."),
+    "realign": ("sensor.commands", "Realign raw frames into view stacks (page u*nnum + v = view "
+                "(u, v))."),
+    "calibrate-aberration": ("recon.dao_commands", "Global system-aberration calibration from a "
+                             "textured capture (e.g. a checkerboard)."),
+    "reconstruct": ("recon.commands", "Reconstruct the all-in-focus image from views (ISA; "
+                    "multisite blocks through Dask)."),
+    "motion": ("motion.commands", "Remove scan (grid) artefacts of moving objects or turbulence "
+               "from a view stack."),
+    "depth": ("depth.commands", "Disparity, depth and confidence maps (TIFF) and a figure from a "
+              "view stack."),
+    "evaluate": ("metrics.commands", "PSNR, SSIM and slanted-edge MTF (ISO 12233) of a result "
+                 "image."),
+    "demo": ("report.commands", "Simulate the built-in resolution chart through a cheap single "
+             "lens, reconstruct it, and write a report (PNG figures, index.html, summary.json)."),
+}
+_COMMAND_MODULES = tuple(dict.fromkeys(module for module, _ in _COMMANDS.values()))
+
+
+def load_commands(module: str) -> dict[str, Any]:
+    """Import ``metasensor.<module>`` and return the click commands its ``register`` adds."""
+    stage = typer.Typer()
+    importlib.import_module(f"metasensor.{module}").register(stage)
+
+    @stage.command("-placeholder-")  # two commands or more: typer builds a group
+    def _placeholder() -> None:  # pragma: no cover - never invoked
+        """Placeholder."""
+
+    group = typer.main.get_group(stage)
+    return {name: cmd for name, cmd in group.commands.items() if name != "-placeholder-"}
+
+
+class LazyGroup(TyperGroup):
+    """A typer group whose commands are listed from ``_COMMANDS`` and imported on first use."""
+
+    def list_commands(self, ctx: Any) -> list[str]:
+        return list(_COMMANDS) + [n for n in super().list_commands(ctx) if n not in _COMMANDS]
+
+    def _load(self, name: str) -> None:
+        if name in _COMMANDS and name not in self.commands:
+            for cmd_name, cmd in load_commands(_COMMANDS[name][0]).items():
+                self.commands.setdefault(cmd_name, cmd)
+
+    def get_command(self, ctx: Any, cmd_name: str) -> Any:
+        if cmd_name in self.commands or cmd_name not in _COMMANDS:
+            return super().get_command(ctx, cmd_name)
+        import click  # a stand-in for the listing; resolve_command loads the real one
+
+        return click.Command(cmd_name, help=_COMMANDS[cmd_name][1])
+
+    def resolve_command(self, ctx: Any, args: list[str]) -> Any:
+        if args:
+            self._load(args[0])
+        return super().resolve_command(ctx, args)
+
 
 app = typer.Typer(
     name="metasensor",
+    cls=LazyGroup,
     help="Meta-imaging sensor: simulate, realign, reconstruct, correct and evaluate captures.",
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_enable=False,
 )
 
-_COMMAND_MODULES = (
-    "optics.commands", "simulation.commands", "sensor.commands", "recon.commands",
-    "recon.dao_commands", "motion.commands", "depth.commands", "metrics.commands",
-    "report.commands",
-)
 
-for _module in _COMMAND_MODULES:
-    importlib.import_module(f"metasensor.{_module}").register(app)
+def _print_version(value: bool) -> None:
+    if value:
+        from metasensor import __version__
+
+        typer.echo(f"metasensor {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _root(
+    version: bool = typer.Option(False, "--version", is_eager=True, callback=_print_version,
+                                 help="Print the version and exit."),
+) -> None:
+    """Meta-imaging sensor: simulate, realign, reconstruct, correct and evaluate captures."""
 
 
 def _fail(message: str, code: int) -> None:
