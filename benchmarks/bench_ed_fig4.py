@@ -131,7 +131,8 @@ def one_case(scene_name: str, rms: float, draw: int, size: int, max_iter: int,
     def add(mode, image, extra=None, seconds=None):
         row = {"scene": scene_name, "rms": rms, "draw": draw, "size": size, "snr_db": snr_db,
                "mode": mode,
-               "psnr": psnr(image, truth, rng_), "ssim": ssim(image, truth, rng_)}
+               "psnr": psnr(truth=truth, image=image, data_range=rng_),
+               "ssim": ssim(truth=truth, image=image, data_range=rng_)}
         if seconds is not None:
             row["seconds"] = seconds
         row.update(extra or {})

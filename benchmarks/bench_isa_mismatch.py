@@ -48,8 +48,8 @@ def run(quick: bool = False) -> list[dict]:
                 t0 = time.perf_counter()
                 rec = ms.reconstruct(cap.views, cap.config, zernike=z, **kw)
                 rows.append({"scene": scene, "defocus_error_waves": error, "variant": name,
-                             "ssim": ssim(rec.image, truth, data_range=rng),
-                             "psnr_db": psnr(rec.image, truth, data_range=rng),
+                             "ssim": ssim(truth=truth, image=rec.image, data_range=rng),
+                             "psnr_db": psnr(truth=truth, image=rec.image, data_range=rng),
                              "registration_px": [round(h, 4) for h in rec.registration[0][0]],
                              "seconds": time.perf_counter() - t0})
     if not quick:

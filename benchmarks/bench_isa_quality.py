@@ -47,7 +47,8 @@ def run(quick: bool = False) -> list[dict]:
             cap = ms.simulate(load_scene(name, size), cfg, snr_db=30.0, seed=0)
             row = measure(cap)
             rng = float(cap.truth.max() - cap.truth.min())
-            row["sensor2d_clean_ssim"] = ssim(cap.sensor2d_clean, cap.truth, data_range=rng)
+            row["sensor2d_clean_ssim"] = ssim(truth=cap.truth, image=cap.sensor2d_clean,
+                                              data_range=rng)
             row.update(denoised_2d(cap, cap.truth, rng))
             rows.append({"scene": name, "size": size, **row})
     if not quick:
@@ -67,10 +68,10 @@ def measure(cap) -> dict:
     rec = ms.reconstruct(cap.views, cap.config, method="isa", zernike=None, field_zernike=None,
                          blocks=(1, 1), overlap=20, iterations=None, device=None)
     seconds = time.perf_counter() - t0
-    s = ssim(rec.image, truth, data_range=rng)
+    s = ssim(truth=truth, image=rec.image, data_range=rng)
     return {"truth_px": truth.shape[0], "snr_db": round(float(cap.snr_db), 2), "isa_ssim": s,
-            "isa_psnr_db": float(psnr(rec.image, truth, data_range=rng)),
-            "sensor2d_ssim": ssim(cap.sensor2d, truth, data_range=rng),
+            "isa_psnr_db": float(psnr(truth=truth, image=rec.image, data_range=rng)),
+            "sensor2d_ssim": ssim(truth=truth, image=cap.sensor2d, data_range=rng),
             "meets_0.90": bool(s >= TARGET), "seconds": seconds}
 
 
@@ -83,14 +84,16 @@ def denoised_2d(cap, truth, rng: float) -> dict:
 
     noisy = np.asarray(cap.sensor2d, np.float64)
     sigma = float(np.std(noisy - cap.sensor2d_clean))
-    best = (ssim(noisy.astype(np.float32), truth, data_range=rng), "none")
+    best = (ssim(truth=truth, image=noisy.astype(np.float32), data_range=rng), "none")
     for w in (0.5, 1.0, 2.0):
         out = denoise_tv_chambolle(noisy, weight=w * sigma)
-        best = max(best, (ssim(out.astype(np.float32), truth, data_range=rng), f"tv {w} sigma"))
+        best = max(best, (ssim(truth=truth, image=out.astype(np.float32), data_range=rng),
+                          f"tv {w} sigma"))
     for h in (0.6, 0.8):
         out = denoise_nl_means(noisy, h=h * sigma, sigma=sigma, patch_size=5, patch_distance=6,
                                fast_mode=True)
-        best = max(best, (ssim(out.astype(np.float32), truth, data_range=rng), f"nlm {h} sigma"))
+        best = max(best, (ssim(truth=truth, image=out.astype(np.float32), data_range=rng),
+                          f"nlm {h} sigma"))
     return {"sensor2d_denoised_ssim": best[0], "sensor2d_denoiser": best[1]}
 
 

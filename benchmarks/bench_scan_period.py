@@ -107,7 +107,7 @@ def run(quick: bool = False) -> list[dict]:
                          "snr_db": None if snr is None else float(snr), "scene": name, "scan": p,
                          "solver": solver, "views_shape": shape,
                          "ssim": float(structural_similarity(truth, rec.image, data_range=dr)),
-                         "psnr_db": float(psnr(rec.image, truth, data_range=dr)),
+                         "psnr_db": float(psnr(truth=truth, image=rec.image, data_range=dr)),
                          "seconds": sec, "truth_scale": k,
                          **({"iterations": rec.iterations, "subsets": rec.subsets}
                             if solver == "rl" else {"hqs_steps": len(rec.history[0][0])})})

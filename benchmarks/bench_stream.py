@@ -160,8 +160,8 @@ def _reconstruct_row(store, out, solver, case, cfg, cap, truth, shape, image_sha
            "write_store_s": write_s, "wall_s": wall, "recon_s": summary["seconds"],
            "s_per_mp": summary["seconds"] / (image_shape[0] * image_shape[1] / 1e6),
            "finite_nonneg": bool(np.isfinite(crop).all() and crop.min() >= 0),
-           "ssim_crop": ssim(crop, tiled, data_range=rng),
-           "ssim_middle_tile_alone": ssim(alone, truth, data_range=rng)}
+           "ssim_crop": ssim(truth=tiled, image=crop, data_range=rng),
+           "ssim_middle_tile_alone": ssim(truth=truth, image=alone, data_range=rng)}
     if case is FULL:
         dest = HERE / "results" / f"stream_reconstruction_{solver}.png"
         shutil.copyfile(out / "reconstruction.png", dest)

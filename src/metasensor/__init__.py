@@ -29,6 +29,11 @@ _EXPORTS = {
     "correct_motion": "metasensor.motion.correct",
     "estimate_depth": "metasensor.depth.estimate",
     "DepthResult": "metasensor.depth.estimate",
+    "read_views": "metasensor.io.views",
+    "write_views": "metasensor.io.views",
+    "read_raw": "metasensor.io.raw",
+    "open_raw": "metasensor.io.raw",
+    "write_raw": "metasensor.io.raw",
 }
 _SUBMODULES = ("optics", "sensor", "simulation", "recon", "motion", "depth", "metrics", "io",
                "report")

@@ -11,17 +11,17 @@ from metasensor.metrics import psnr, snr_db, ssim
 def test_psnr_closed_form():
     truth = np.linspace(0, 2, 64 * 64).reshape(64, 64)
     image = truth + 0.1  # MSE = 0.01, data range = 2
-    assert psnr(image, truth) == pytest.approx(10 * math.log10(4 / 0.01), rel=1e-9)
-    assert psnr(image, truth, data_range=1.0) == pytest.approx(20.0, rel=1e-9)
-    assert psnr(truth, truth) == math.inf
+    assert psnr(truth=truth, image=image) == pytest.approx(10 * math.log10(4 / 0.01), rel=1e-9)
+    assert psnr(truth=truth, image=image, data_range=1.0) == pytest.approx(20.0, rel=1e-9)
+    assert psnr(truth=truth, image=truth) == math.inf
 
 
 def test_ssim_bounds_and_order():
     rng = np.random.default_rng(0)
     truth = rng.random((64, 64))
-    assert ssim(truth, truth) == pytest.approx(1.0)
-    low = ssim(truth + rng.normal(0, 0.3, truth.shape), truth)
-    high = ssim(truth + rng.normal(0, 0.05, truth.shape), truth)
+    assert ssim(truth=truth, image=truth) == pytest.approx(1.0)
+    low = ssim(truth=truth, image=truth + rng.normal(0, 0.3, truth.shape))
+    high = ssim(truth=truth, image=truth + rng.normal(0, 0.05, truth.shape))
     assert -1 <= low < high < 1
 
 
@@ -36,21 +36,21 @@ def test_errors_and_inputs_not_modified():
     b = np.zeros((16, 16))
     b[:, 8:] = 1
     before = b.copy()
-    psnr(a, b)
+    psnr(truth=b, image=a)
     np.testing.assert_array_equal(b, before)
     with pytest.raises(ValueError, match="shape"):
-        psnr(a, np.ones((16, 15)))
+        psnr(truth=np.ones((16, 15)), image=a)
     bad = b.copy()
     bad[0, 0] = np.nan
     with pytest.raises(ValueError, match="truth contains NaN"):
-        ssim(a, bad)
+        ssim(truth=bad, image=a)
     with pytest.raises(ValueError, match="image contains NaN"):
-        psnr(bad, b)
+        psnr(truth=b, image=bad)
     with pytest.raises(ValueError, match="data_range"):
-        psnr(b, a)  # constant truth: range 0
+        psnr(truth=a, image=b)  # constant truth: range 0
     with pytest.raises(ValueError, match="2-D"):
-        ssim(np.ones(16), np.ones(16))
+        ssim(truth=np.ones(16), image=np.ones(16))
     with pytest.raises(ValueError, match="7x7"):
-        ssim(np.ones((5, 5)), b[:5, :5])
+        ssim(truth=b[:5, :5], image=np.ones((5, 5)))
     with pytest.raises(ValueError, match="NaN"):
         snr_db(np.ones(3), np.array([1, np.nan, 1]))

@@ -22,7 +22,7 @@ S = 40  # view samples per side
 def _ssim(a, b):
     from metasensor.metrics import ssim
 
-    return ssim(np.asarray(b), np.asarray(a), data_range=1.0)
+    return ssim(truth=np.asarray(a), image=np.asarray(b), data_range=1.0)
 
 
 @pytest.fixture(scope="module")

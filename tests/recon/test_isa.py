@@ -99,6 +99,6 @@ def test_coarse_scans_default_to_the_simultaneous_update():
     rec = ms.reconstruct(cap.views, cap.config, solver="rl")
     os16 = ms.reconstruct(cap.views, cap.config, solver="rl", subsets=16)
     assert rec.subsets == 1 and os16.subsets == 16
-    ssim = [ssim_of(r.image, t) for r in (rec, os16)]  # data range: the truth's
+    ssim = [ssim_of(truth=t, image=r.image) for r in (rec, os16)]  # data range: the truth's
     assert ssim[0] > ssim[1] + 0.04
     assert rec.image.max() < t.max()

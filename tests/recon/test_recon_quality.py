@@ -16,13 +16,13 @@ L = 12  # lenslets per side: a 180 x 180 px field
 def _ssim(truth, image):
     from metasensor.metrics import ssim
 
-    return ssim(image, truth)  # data range: the truth's
+    return ssim(truth=truth, image=image)  # data range: the truth's
 
 
 def _psnr(truth, image):
     from metasensor.metrics import psnr
 
-    return psnr(image, truth)
+    return psnr(truth=truth, image=image)
 
 
 @pytest.fixture(scope="module")

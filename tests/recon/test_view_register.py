@@ -90,7 +90,8 @@ def test_registration_rescues_hqs_from_a_defocus_error(capture):
     right = ms.reconstruct(cap.views, cap.config, register=True)
     wrong = ms.reconstruct(cap.views, cap.config, zernike=z)  # the default: no registration
     fixed = ms.reconstruct(cap.views, cap.config, zernike=z, register=True)
-    s_right, s_wrong, s_fixed = (ssim(r.image, t, data_range=rng) for r in (right, wrong, fixed))
+    s_right, s_wrong, s_fixed = (ssim(truth=t, image=r.image, data_range=rng)
+                                 for r in (right, wrong, fixed))
     assert s_fixed > s_wrong + 0.2, (s_wrong, s_fixed)
     assert s_fixed > s_right - 0.06, (s_right, s_fixed)
     assert right.registration[0][0][0] < 0.05  # the right bank: nothing to register

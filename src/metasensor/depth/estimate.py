@@ -65,6 +65,7 @@ class DepthResult:
         geometry is known, else ``None`` (``image_depth`` is there either way);
         ``depth_kind`` says which metric maps exist (``"object"`` or ``"image"`` only).
     candidates : the candidate disparities of the plane sweep (view px per view step).
+    config : the system configuration used.
     """
 
     disparity: np.ndarray
@@ -75,6 +76,11 @@ class DepthResult:
     depth_kind: str
     candidates: np.ndarray
     config: SystemConfig
+
+    def __repr__(self) -> str:  # the maps by shape and dtype, not their values
+        from metasensor.summary import short_repr
+
+        return short_repr(self)
 
 
 def _check_views(views, cfg: SystemConfig) -> np.ndarray:

@@ -16,7 +16,7 @@ import numpy as np
 
 from metasensor.io.tiff import open_tiff
 
-__all__ = ["RawFrames", "open_raw", "write_raw"]
+__all__ = ["RawFrames", "open_raw", "read_raw", "write_raw"]
 
 
 class RawFrames:
@@ -147,6 +147,27 @@ class RawFrames:
 def open_raw(source, *, mmap: bool = True) -> RawFrames:
     """Open raw frames (a multi-page TIFF path or an array) for streaming."""
     return RawFrames(source, mmap=mmap)
+
+
+def read_raw(source, t0: int = 0, t1: int | None = None) -> np.ndarray:
+    """Read raw frames ``t0 .. t1-1`` into one new array.
+
+    Parameters
+    ----------
+    source : str, Path or array_like
+        A multi-page TIFF (one 2-D frame per page, as ``metasensor simulate`` writes
+        ``frames.tif``) or a ``(T, H, W)`` array.
+    t0, t1 : int
+        The frames to read (default: all).
+
+    Returns
+    -------
+    numpy.ndarray
+        ``(t1 - t0, H, W)`` in the file's dtype (counts, DN). Use :func:`open_raw` to stream
+        frames one at a time instead.
+    """
+    with RawFrames(source) as raw:
+        return raw.read(t0, t1)
 
 
 def write_raw(path: str | Path, frames: np.ndarray, description: str | None = None) -> Path:

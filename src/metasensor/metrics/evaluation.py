@@ -50,8 +50,8 @@ def evaluate_full(image, truth=None, chart: bool = False, rois=None, *,
         t = np.asarray(truth)
         if t.shape != a.shape:
             raise ValueError(f"truth shape {t.shape} differs from image shape {a.shape}")
-        out["psnr_db"] = _finite(psnr(a, t))
-        out["ssim"] = ssim(a, t)
+        out["psnr_db"] = _finite(psnr(truth=t, image=a))
+        out["ssim"] = ssim(truth=t, image=a)
         out["data_range"] = float(t.max() - t.min())
     fm = None
     if chart or rois:

@@ -1,6 +1,9 @@
 """Full-reference image quality: PSNR, SSIM (scikit-image) and the SNR of a noisy signal.
 
-Images are compared **as given**: no rescaling or matching of the intensity scale. ``data_range``
+Both take their images by keyword only, ``psnr(truth=..., image=...)``: scikit-image's order
+is ``(truth, image)`` and this package's was the reverse, so a positional call could silently
+swap them (the data range, and therefore the answer, follows the truth). Images are compared
+**as given**: no rescaling or matching of the intensity scale. ``data_range``
 defaults to the range of the reference, ``truth.max() - truth.min()`` (as in the paper's figures;
 scikit-image would otherwise guess it from the dtype).
 """
@@ -39,11 +42,20 @@ def _range(truth: np.ndarray, data_range) -> float:
     return float(data_range)
 
 
-def psnr(image, truth, data_range: float | None = None) -> float:
+def psnr(*, truth, image, data_range: float | None = None) -> float:
     """Peak signal-to-noise ratio in dB, ``10 log10(data_range^2 / MSE)`` (inf if identical).
 
-    image, truth: 2-D arrays of equal shape, compared as given; data_range defaults to
-    ``truth.max() - truth.min()``.
+    Parameters
+    ----------
+    truth, image : array_like, (H, W)
+        The reference and the image under test, equal shapes, compared as given (keyword only).
+    data_range : float, optional
+        Peak-to-peak range of the data; default ``truth.max() - truth.min()``.
+
+    Returns
+    -------
+    float
+        PSNR in dB (scikit-image's ``peak_signal_noise_ratio``).
     """
     from skimage.metrics import peak_signal_noise_ratio
 
@@ -54,11 +66,21 @@ def psnr(image, truth, data_range: float | None = None) -> float:
     return float(peak_signal_noise_ratio(b, a, data_range=rng))
 
 
-def ssim(image, truth, data_range: float | None = None) -> float:
+def ssim(*, truth, image, data_range: float | None = None) -> float:
     """Structural similarity (scikit-image defaults: 7x7 uniform window), in [-1, 1].
 
-    image, truth: 2-D arrays of equal shape (>= 7x7), compared as given; data_range defaults to
-    ``truth.max() - truth.min()``.
+    Parameters
+    ----------
+    truth, image : array_like, (H, W)
+        The reference and the image under test, equal shapes (>= 7x7), compared as given
+        (keyword only).
+    data_range : float, optional
+        Peak-to-peak range of the data; default ``truth.max() - truth.min()``.
+
+    Returns
+    -------
+    float
+        SSIM (scikit-image's ``structural_similarity``).
     """
     from skimage.metrics import structural_similarity
 

@@ -61,7 +61,39 @@ HQS_MAX_STEP = 5  # HQS up to this scan step (pixels)
 
 @dataclass
 class Reconstruction:
-    """Result of :func:`reconstruct`."""
+    """Result of :func:`reconstruct`.
+
+    Attributes
+    ----------
+    image : numpy.ndarray or array-like, (H, W) float32
+        The reconstructed image on the pixel grid, in the views' intensity units (or the
+        Zarr/TIFF-backed array written to ``out``).
+    zernike : numpy.ndarray, (by, bx, J) float32
+        The aberration used for each block: Noll vectors in waves (DAO's estimate with
+        ``method="wave"``/``"geometric"``; zeros with a given PSF bank).
+    history : list
+        ``[by][bx]`` -> the ISA solver's per-iteration residuals.
+    blocks : list of Block
+        The multisite blocks (regions and windows in output pixels).
+    method : str
+        ``"isa"``, ``"wave"`` or ``"geometric"`` (DAO before ISA).
+    config : SystemConfig
+        The system configuration used.
+    iterations, subsets : int
+        Richardson–Lucy iterations and view subsets per iteration (solver ``"rl"``).
+    seconds : float
+        Wall time of the reconstruction, s.
+    solver : str
+        The ISA solver used: ``"hqs"`` (sparse-gradient prior) or ``"rl"`` (Richardson–Lucy).
+    dao_history : list
+        ``[by][bx]`` -> DAO's history (wavefront updates, waves r.m.s.) with wave/geometric DAO.
+    registration : list
+        ``[by][bx]`` -> r.m.s. view shift (pixels) measured in each registration round.
+    registration_zernike : numpy.ndarray or None, (by, bx, J)
+        The wavefront (waves, Noll) the registered shifts amount to; None without registration.
+    views_used : int
+        Number of views deconvolved.
+    """
 
     image: Any  # (H, W) float32 ndarray (or the zarr/TIFF-backed array written to ``out``)
     zernike: np.ndarray  # (by, bx, J) Noll vectors in waves (zeros with a given psf bank)
@@ -80,6 +112,11 @@ class Reconstruction:
     # each block's bank (Registration.zernike); None without registration
     registration_zernike: np.ndarray | None = None
     views_used: int = 0  # views deconvolved (cfg.view_mask(view_radius))
+
+    def __repr__(self) -> str:  # the arrays by shape and dtype, not their values
+        from metasensor.summary import short_repr
+
+        return short_repr(self)
 
 
 @dataclass

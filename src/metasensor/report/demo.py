@@ -170,8 +170,8 @@ def run_demo(out: str | Path, settings: DemoSettings | None = None, progress: bo
     table = []
     for name, (img, truth) in results.items():
         rng = float(truth.max() - truth.min())
-        row = {"sensor": name, "psnr_db": psnr(img, truth, data_range=rng),
-               "ssim": ssim(img, truth, data_range=rng)}
+        row = {"sensor": name, "psnr_db": psnr(truth=truth, image=img, data_range=rng),
+               "ssim": ssim(truth=truth, image=img, data_range=rng)}
         row.update({k: v for k, v in _mtf_centre_edge(img, truth).items()
                     if k in ("centre_mtf50", "edge_mtf50")})
         table.append(row)

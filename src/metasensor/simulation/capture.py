@@ -54,13 +54,42 @@ __all__ = ["Capture", "simulate", "plain_lightfield"]
 class Capture:
     """A simulated capture. Arrays are NumPy; intensities in DN (see the module docstring).
 
-    frames (T, H', W') uint16 raw frames in ``scan_order``; views / views_clean
-    (nnum, nnum, Ly·p, Lx·p) float32 (noisy = ``realign(frames)``, and noise-free unquantised);
-    truth, sensor2d, hardware_ao (and their ``_clean`` versions) (Ly·nnum, Lx·nnum) float32;
-    zernike: the true Noll vector (waves; None = aberration-free) or, for field-dependent
-    aberrations, the total (global + field) vectors (by, bx, J) at the block centres rendered;
-    field_zernike: the field part alone at those centres (None if uniform); config: ``cfg`` with
-    ``scan`` set to the period used.
+    Attributes
+    ----------
+    frames : numpy.ndarray, (T, H', W') uint16
+        Raw frames in ``scan_order``.
+    views, views_clean : numpy.ndarray, (nnum, nnum, Ly·p, Lx·p) float32
+        The noisy views (``realign(frames)``) and the noise-free, unquantised ones.
+    truth : numpy.ndarray, (Ly·nnum, Lx·nnum) float32
+        The scaled scene on the reconstruction grid (DN).
+    zernike : numpy.ndarray or None
+        The true Noll vector (waves; None = aberration-free) or, for field-dependent
+        aberrations, the total (global + field) vectors ``(by, bx, J)`` at the block centres.
+    sensor2d, hardware_ao : numpy.ndarray or None, (Ly·nnum, Lx·nnum) float32
+        The conventional 2D sensor and hardware adaptive optics, same photon budget per pixel
+        (None with ``comparison=False``); ``sensor2d_clean``, ``hardware_ao_clean``: noise-free.
+    config : SystemConfig
+        ``cfg`` with ``scan`` set to the period used.
+    scan_order : list of (int, int)
+        The scan phases (row, col) in acquisition order.
+    noise : NoiseModel
+        The noise model applied (gain, read noise, bit depth).
+    scale : float
+        DN per scene unit.
+    snr_db : float
+        The measured SNR of the views, dB.
+    offset : int
+        Sensor pixel of truth pixel (0, 0): ``(nnum - d) // 2``.
+    field_zernike : numpy.ndarray or None, (by, bx, J)
+        The field part of the aberration alone at the block centres (None if uniform).
+    depth_planes : numpy.ndarray or None
+        The depth layers rendered (m, image side), None without ``depth``.
+    phase_screens : numpy.ndarray or None
+        Turbulence phase screens per frame (waves), None without turbulence.
+    ao_residual_rms : float or None
+        Residual wavefront of the hardware AO, waves r.m.s.
+    options : dict
+        The simulate() arguments that made this capture (not in ``repr``).
     """
 
     frames: np.ndarray
@@ -88,6 +117,11 @@ class Capture:
     def centre_view(self) -> np.ndarray:
         c = self.config.nnum // 2
         return self.views[c, c]
+
+    def __repr__(self) -> str:  # the arrays by shape and dtype, not their values
+        from metasensor.summary import short_repr
+
+        return short_repr(self)
 
 
 def _check_scene(scene) -> np.ndarray:
