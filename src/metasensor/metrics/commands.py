@@ -54,7 +54,10 @@ def register(app: typer.Typer) -> None:
                                              "(repeat the option for several)."),
         pixel_pitch: float | None = typer.Option(None, "--pixel-pitch",
                                                  help="Pixel pitch in metres (adds lp/mm)."),
-        out: Path | None = typer.Option(None, "--out", file_okay=False,
+        data_range: float | None = typer.Option(
+            None, "--data-range", help="Peak-to-peak range for PSNR/SSIM (default: the truth's "
+            "max - min; needed for a constant truth)."),
+        out: Path | None = typer.Option(None, "--out", "-o", file_okay=False,
                                         help="Output folder (default: "
                                         "RESULT's folder / <RESULT stem>_evaluation)."),
     ) -> None:
@@ -77,7 +80,7 @@ def register(app: typer.Typer) -> None:
         ref = read_image(truth, "truth image") if truth is not None else None
         rois = [parse_roi(r) for r in roi] if roi else None
         res, fm = evaluate_full(img, ref, chart=chart, rois=rois, pixel_pitch=pixel_pitch,
-                                progress=True)
+                                data_range=data_range, progress=True)
         res["inputs"] = {"result": str(result), "truth": None if truth is None else str(truth)}
         staged = StagedFolder(out, OUTPUT_FILES)  # the folder appears complete, or not at all
         written = write_evaluation(staged.path, res, fm, image=img, truth=ref)

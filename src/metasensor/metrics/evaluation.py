@@ -34,7 +34,8 @@ def _finite(v):
 
 def evaluate_full(image, truth=None, chart: bool = False, rois=None, *,
                   pixel_pitch: float | None = None, oversample: int = 4,
-                  window: str = "hamming", progress: bool = False) -> tuple[dict, FieldMTF | None]:
+                  window: str = "hamming", progress: bool = False,
+                  data_range: float | None = None) -> tuple[dict, FieldMTF | None]:
     """Like :func:`evaluate`, also returning the :class:`FieldMTF` (None without MTF work)."""
     a = np.asarray(image)
     if a.ndim != 2:
@@ -50,9 +51,9 @@ def evaluate_full(image, truth=None, chart: bool = False, rois=None, *,
         t = np.asarray(truth)
         if t.shape != a.shape:
             raise ValueError(f"truth shape {t.shape} differs from image shape {a.shape}")
-        out["psnr_db"] = _finite(psnr(truth=t, image=a))
-        out["ssim"] = ssim(truth=t, image=a)
-        out["data_range"] = float(t.max() - t.min())
+        out["psnr_db"] = _finite(psnr(truth=t, image=a, data_range=data_range))
+        out["ssim"] = ssim(truth=t, image=a, data_range=data_range)
+        out["data_range"] = float(t.max() - t.min()) if data_range is None else float(data_range)
     fm = None
     if chart or rois:
         fm = field_mtf(a, list(rois) if rois else None, reference=truth,
@@ -80,20 +81,22 @@ def evaluate_full(image, truth=None, chart: bool = False, rois=None, *,
 
 def evaluate(image, truth=None, chart: bool = False, rois=None, *,
              pixel_pitch: float | None = None, oversample: int = 4, window: str = "hamming",
-             progress: bool = False) -> dict:
+             progress: bool = False, data_range: float | None = None) -> dict:
     """Quality figures of a result image, as a JSON-ready dict.
 
     image: 2-D result; truth: 2-D reference of the same shape (gives ``psnr_db``, ``ssim``,
-    compared as given with data_range = truth range); chart: find slanted-edge squares (on the
-    truth if given, else on the image) and measure the MTF in each; rois: explicit list of
-    (y0, y1, x0, x1) instead. Keys: ``shape``, ``psnr_db``, ``ssim``, ``field`` (MTF50 summary:
-    ``centre_mtf50``, ``edge_mtf50``, ``edge_over_centre``; cycles/pixel), ``mtf`` (per ROI:
+    compared as given with ``data_range``, default the truth's range); chart: find slanted-edge
+    squares (on the truth if given, else on the image) and measure the MTF in each; rois:
+    explicit list of (y0, y1, x0, x1) instead. Keys: ``shape``, ``psnr_db``, ``ssim``,
+    ``field`` (MTF50 summary: ``centre_mtf50``, ``edge_mtf50``, ``edge_over_centre``;
+    cycles/pixel), ``mtf`` (per ROI:
     roi, centre, field_radius, orientation, angle_deg, mtf50, freq, mtf up to 0.5 cycles/pixel,
     error), ``mtf_positions`` (ROI indices spread from centre to edge). Unavailable values
     (e.g. infinite PSNR, no MTF50) are None.
     """
     return evaluate_full(image, truth, chart, rois, pixel_pitch=pixel_pitch,
-                         oversample=oversample, window=window, progress=progress)[0]
+                         oversample=oversample, window=window, progress=progress,
+                         data_range=data_range)[0]
 
 
 def _csv_text(result: dict) -> str:

@@ -2,28 +2,19 @@
 
 from __future__ import annotations
 
-import ast
 from pathlib import Path
 
 import typer
 
+from metasensor.cli_options import SCAN_ORDER_HELP, SCAN_ORDER_NAMES
+
 
 def parse_scan_order(text: str, period: int) -> list[tuple[int, int]]:
-    """``row-major`` / ``serpentine`` / a Python list of (row, col) pairs → checked scan order.
+    """``--scan-order`` (:func:`metasensor.cli_options.parse_scan_order`) → checked scan order.
     ``period`` 0: a list sets its own period (sqrt of its length); names use 5."""
-    from metasensor.sensor.scan import check_scan_order, period_of
+    from metasensor.cli_options import parse_scan_order as parse
 
-    text = text.strip()
-    if text.startswith("["):
-        try:
-            order = ast.literal_eval(text)
-        except (ValueError, SyntaxError):
-            raise ValueError(
-                f"--scan-order: cannot parse {text!r} as a list of (row, col)") from None
-        if not isinstance(order, (list, tuple)):
-            raise ValueError(f"--scan-order: {text!r} is not a list of (row, col)")
-        return check_scan_order(order, period or period_of(order))
-    return check_scan_order(text, period or 5)
+    return parse(text or "row-major", period or None)
 
 
 def _figure(before, after, path: Path) -> Path:
@@ -55,9 +46,8 @@ def register(app: typer.Typer) -> None:
         views: Path = typer.Argument(..., help="input view stack (.tif/.zarr, nnum² pages)"),
         out: Path = typer.Option(..., "--out", "-o", help="output view stack (.tif or .zarr)"),
         scan_order: str | None = typer.Option(
-            None, "--scan-order",
-            help='row-major, serpentine, or a list such as "[(0,0),(0,1),...]" (default: the '
-                 "order stored in the stack, else row-major)"),
+            None, *SCAN_ORDER_NAMES,
+            help=f"{SCAN_ORDER_HELP} (default: the order stored in the stack, else row-major)"),
         period: int = typer.Option(0, "--period",
                                    help="scan period (default: from the stack's config, or 5)"),
         reference: int = typer.Option(-1, "--reference",

@@ -12,8 +12,9 @@ def register(app: typer.Typer) -> None:
 
     @app.command("psf")
     def psf_command(
-        config: Path = typer.Option(..., "--config", help="system configuration (TOML)"),
-        out: Path = typer.Option(..., "--out", dir_okay=False,
+        config: Path | None = typer.Option(None, "--config", help="system configuration (TOML; "
+                                           "default: the prototype)"),
+        out: Path = typer.Option(..., "--out", "-o", dir_okay=False,
                                  help="output HDF5 file (dataset 'psf', axes u, v, y, x)"),
         zernike: str = typer.Option("", "--zernike",
                                     help="Noll index:waves pairs, e.g. '4:0.5,7:-0.2', or a .npy "
@@ -35,7 +36,7 @@ def register(app: typer.Typer) -> None:
         from metasensor.optics.psf_io import parse_zernike, plot_views, save_psf
 
         guard([config, npy_argument(zernike)], [out, png or out.with_suffix(".png")])
-        cfg = SystemConfig.from_toml(config)
+        cfg = SystemConfig.from_toml(config) if config is not None else SystemConfig()
         z = parse_zernike(zernike)
         if out.suffix.lower() not in (".h5", ".hdf5"):
             raise ValueError(f"--out must end in .h5 or .hdf5, got {out.name!r}")

@@ -151,7 +151,7 @@ def register(app: typer.Typer) -> None:
     @app.command("reconstruct")
     def reconstruct_cmd(
         views: Path = typer.Argument(..., help="view stack (.tif pages u*nnum+v, or .zarr)"),
-        out: Path = typer.Option(..., "--out", file_okay=False, help="output folder"),
+        out: Path = typer.Option(..., "--out", "-o", file_okay=False, help="output folder"),
         psf: Path | None = typer.Option(None, "--psf", help="PSF bank (HDF5, dataset 'psf')"),
         config: Path | None = typer.Option(None, "--config", help="system configuration TOML"),
         method: str = typer.Option("isa", "--method", "--dao",

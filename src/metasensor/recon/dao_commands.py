@@ -27,8 +27,9 @@ def register(app: typer.Typer) -> None:
     @app.command("calibrate-aberration")
     def calibrate_aberration(
         capture: Path = typer.Argument(..., help="view stack (TIFF/Zarr) of a textured target"),
-        out: Path = typer.Option(Path("system.h5"), "--out", dir_okay=False,
-                                 help="calibration file (HDF5)"),
+        out: Path | None = typer.Option(None, "--out", "-o", dir_okay=False,
+                                        help="calibration file (HDF5; default: "
+                                        "<CAPTURE stem>_system.h5 beside the capture)"),
         config: Path | None = typer.Option(None, "--config",
                                            help="system TOML (default: the capture's metadata)"),
         blocks: str = typer.Option("4x4", help="blocks whose centres get a wavefront, e.g. 4x4"),
@@ -51,6 +52,8 @@ def register(app: typer.Typer) -> None:
 
         if not capture.exists():
             raise FileNotFoundError(f"capture not found: {capture}")
+        if out is None:  # beside its input, like the other commands; never in the cwd
+            out = capture.parent / f"{capture.stem}_system.h5"
         from metasensor.io.guard import guard
 
         guard([capture, config], [out, out.with_suffix(".png") if figure else None])

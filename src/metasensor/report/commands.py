@@ -12,7 +12,7 @@ def register(app: typer.Typer) -> None:
 
     @app.command("demo")
     def demo(
-        out: Path = typer.Option(Path("demo"), "--out", file_okay=False,
+        out: Path = typer.Option(Path("demo"), "--out", "-o", file_okay=False,
                                   help="folder for the report"),
         size: int = typer.Option(384, "--size", min=96, help="scene side in pixels"),
         scan: int = typer.Option(5, "--scan", help="scan period of the meta-imaging sensor"),

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import typer
 
-_ORDERS = "row-major, serpentine, or an explicit list '0,0;0,1;...'"
+from metasensor.cli_options import SCAN_ORDER_HELP, SCAN_ORDER_NAMES
 
 
 def _config(config: Path | None, scan: int | None):
@@ -18,25 +18,19 @@ def _config(config: Path | None, scan: int | None):
 
 
 def _order(text: str | None, period: int):
+    from metasensor.cli_options import parse_scan_order
     from metasensor.sensor.scan import check_scan_order
 
-    if text is None or text in ("row-major", "serpentine", "rowmajor", "raster", "snake",
-                                "boustrophedon"):
-        return check_scan_order(text, period)
-    try:
-        pairs = [tuple(int(v) for v in item.split(",")) for item in text.split(";") if item]
-    except ValueError:
-        raise ValueError(f"--order must be {_ORDERS}; got {text!r}") from None
-    return check_scan_order(pairs, period)
+    return parse_scan_order(text, period) or check_scan_order(None, period)
 
 
 def calibrate_cmd(
     white: Path = typer.Argument(..., help="white (flat-field) or textured raw frame(s), TIFF"),
-    out: Path = typer.Option(..., "--out", dir_okay=False,
+    out: Path = typer.Option(..., "--out", "-o", dir_okay=False,
                              help="calibration file to write (.toml)"),
     config: Path | None = typer.Option(None, "--config", help="system configuration TOML"),
     scan: int | None = typer.Option(None, "--scan", help="scan period of a multi-page input"),
-    order: str | None = typer.Option(None, "--order", help=f"scan order: {_ORDERS}"),
+    order: str | None = typer.Option(None, *SCAN_ORDER_NAMES, help=SCAN_ORDER_HELP),
     moving: str = typer.Option("mla", "--moving", help="what moves during the scan: mla|image"),
     flat: bool = typer.Option(True, "--flat/--no-flat", help="also write the flat-field map"),
     figure: Path | None = typer.Option(None, "--figure", dir_okay=False,
@@ -46,7 +40,7 @@ def calibrate_cmd(
     """Calibrate the lenslet grid (pitch, rotation, centre, flat field, scan offsets).
 
     A one-page TIFF gives the grid; a TIFF with scan² pages (one scan period, in
-    --order) also gives each scan phase's actual offset, reported against nominal.
+    --scan-order) also gives each scan phase's actual offset, reported against nominal.
     Use a white frame where you can: a textured scene biases the fitted pitch (up to 0.6 % on
     a 192-px frame, 0.03 % on a 768-px one; a white one 0.01 %).
 
@@ -96,14 +90,15 @@ def calibrate_cmd(
 
 def realign_cmd(
     raw_path: Path = typer.Argument(..., metavar="RAW", help="raw frames, multi-page TIFF"),
-    out: Path = typer.Option(..., "--out", help="view stack(s) to write (.tif or .zarr)"),
+    out: Path = typer.Option(..., "--out", "-o", help="view stack(s) to write (.tif or .zarr)"),
     calib_path: Path | None = typer.Option(None, "--calib", help="calibration TOML (none: "
                                            "frames are already rectified)"),
     config: Path | None = typer.Option(None, "--config", help="system configuration TOML "
                                        "(default: the one stored in RAW's description, if any)"),
     scan: int | None = typer.Option(None, "--scan", help="scan period (default: config's)"),
-    order: str | None = typer.Option(None, "--order", help=f"scan order: {_ORDERS} (default: "
-                                     "RAW's stored order, else row-major)"),
+    order: str | None = typer.Option(None, *SCAN_ORDER_NAMES,
+                                     help=f"{SCAN_ORDER_HELP} (default: RAW's stored order, "
+                                     "else row-major)"),
     moving: str | None = typer.Option(None, "--moving", help="what moves during the scan: "
                                       "mla|image (default: RAW's stored value, else mla)"),
     offsets: str = typer.Option("measure", "--offsets", help="per-frame grid offsets: measure "

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import typer
 
+from metasensor.cli_options import SCAN_ORDER_HELP, SCAN_ORDER_NAMES, parse_scan_order
 from metasensor.optics.psf_io import parse_zernike
 
 
@@ -107,7 +108,7 @@ def register(app: typer.Typer) -> None:
 
     @app.command("simulate")
     def simulate_cmd(
-        out: Path = typer.Option(..., "--out", file_okay=False, help="output folder"),
+        out: Path = typer.Option(..., "--out", "-o", file_okay=False, help="output folder"),
         scene: str = typer.Option("chart", help="built-in scene name or an image file"),
         size: int = typer.Option(512, help="scene size in pixels (square)"),
         config: Path = typer.Option(None, help="system configuration TOML (default: prototype)"),
@@ -116,7 +117,7 @@ def register(app: typer.Typer) -> None:
                                     "or a .npy Noll vector"),
         lens: bool = typer.Option(False, help="field-dependent single-lens (f=135 mm f/10)"),
         scan: int = typer.Option(None, help="scan period (default: the config's)"),
-        order: str = typer.Option("row-major", help="scan order: row-major or serpentine"),
+        order: str = typer.Option("row-major", *SCAN_ORDER_NAMES, help=SCAN_ORDER_HELP),
         snr: float = typer.Option(None, help="target SNR of the views in dB (default: no noise)"),
         photons: float = typer.Option(None, help="photo-electrons at full scale (or --snr)"),
         read_noise: float = typer.Option(2.0, help="read noise, electrons r.m.s."),
@@ -159,6 +160,7 @@ def register(app: typer.Typer) -> None:
             single = SingleLens()
             cfg = single.config(cfg)
             field = single.field_zernike(cfg, img.shape)
+        order = parse_scan_order(order, scan, default_period=cfg.scan)
         cap = simulate(img, cfg, zernike=z, field_zernike=field, scan=scan, scan_order=order,
                        snr_db=snr, seed=seed, photons=photons, read_noise=read_noise,
                        bit_depth=bits, device=device, progress=True)

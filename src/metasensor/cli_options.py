@@ -1,0 +1,72 @@
+"""Conventions shared by every ``metasensor`` command: one scan-order syntax (and one option
+name, ``--scan-order``, with ``--order`` kept as an alias), and ``--out``/``-o`` for outputs.
+
+``tests/test_cli_conventions.py`` checks every registered command against them.
+"""
+
+from __future__ import annotations
+
+import re
+
+__all__ = ["SCAN_ORDER_SYNTAX", "SCAN_ORDER_HELP", "SCAN_ORDER_NAMES", "parse_scan_order"]
+
+SCAN_ORDER_NAMES = ("--scan-order", "--order")
+SCAN_ORDER_SYNTAX = ("row-major, serpentine, or the (row,col) phases in acquisition order as "
+                     "'0,0;0,1;0,2;...' ('[(0,0),(0,1),...]' is read too)")
+SCAN_ORDER_HELP = f"scan order: {SCAN_ORDER_SYNTAX}"
+_PRESETS = ("row-major", "rowmajor", "raster", "serpentine", "snake", "boustrophedon")
+_PAIR = re.compile(r"\(\s*(-?\d+)\s*,\s*(-?\d+)\s*\)")
+
+
+def _pairs(text: str) -> list[tuple[int, int]]:
+    if "(" in text:  # the Python-list spelling
+        if _PAIR.sub("", text).strip("[] ,;\t"):
+            raise ValueError("unreadable")
+        return [(int(r), int(c)) for r, c in _PAIR.findall(text)]
+    pairs = []
+    for item in text.split(";"):
+        if item.strip():
+            r, c = item.split(",")  # ValueError unless exactly two numbers
+            pairs.append((int(r), int(c)))
+    return pairs
+
+
+def parse_scan_order(text: str | None, period: int | None = None, *,
+                     default_period: int = 5) -> list[tuple[int, int]] | None:
+    """Read a ``--scan-order`` value into a checked list of (row, col) phases.
+
+    Parameters
+    ----------
+    text : str or None
+        A preset name (``row-major``, ``serpentine``), ``'r,c;r,c;...'`` or
+        ``'[(r,c),(r,c),...]'``. None or empty: None (the caller's default).
+    period : int or None
+        The scan period the order must cover; None or 0: an explicit list sets its own
+        (the square root of its length) and a preset name uses ``default_period``.
+
+    Returns
+    -------
+    list of (int, int) or None
+
+    Raises
+    ------
+    ValueError
+        One line naming ``--scan-order``, what is wrong and the accepted syntax.
+    """
+    from metasensor.sensor.scan import check_scan_order, period_of
+
+    if text is None or not text.strip():
+        return None
+    text = text.strip()
+    try:
+        if text.lower() in _PRESETS:
+            return check_scan_order(text.lower(), period or default_period)
+        try:
+            pairs = _pairs(text)
+        except ValueError:
+            raise ValueError(f"cannot read {text!r}") from None
+        if not pairs:
+            raise ValueError(f"no phases in {text!r}")
+        return check_scan_order(pairs, period or period_of(pairs))
+    except ValueError as exc:
+        raise ValueError(f"--scan-order: {exc}; use {SCAN_ORDER_SYNTAX}") from None
