@@ -5,7 +5,6 @@ import pytest
 import typer
 from typer.testing import CliRunner
 
-from metasensor import cli
 from metasensor.config import SystemConfig
 from metasensor.optics.commands import register
 from metasensor.optics.psf import view_psfs

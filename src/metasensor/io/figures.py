@@ -73,21 +73,23 @@ def _finite_range(arrays: Sequence[np.ndarray]) -> tuple[float, float]:
 
 def save_image(path: str | Path, image, *, title: str | None = None, cmap: str = "gray",
                vmin: float | None = None, vmax: float | None = None, colorbar: bool = False,
-               dpi: int = 110) -> Path:
-    """Save a 2-D image ``[y, x]`` as a PNG figure (row 0 at the top), atomically."""
+               colorbar_label: str | None = None, dpi: int = 110) -> Path:
+    """Save a 2-D image ``[y, x]`` as a PNG figure (row 0 at the top), atomically; a colour bar
+    (labelled with ``colorbar_label``, its units) if ``colorbar`` or a label is given."""
     a = _check_image(image)
     lo, hi = _finite_range([a])
     h, w = a.shape
     scale = 6.0 / max(h, w)
-    fig, ax = new_figure(size=(max(2.5, w * scale + (1.2 if colorbar else 0.3)),
+    bar = colorbar or bool(colorbar_label)
+    fig, ax = new_figure(size=(max(2.5, w * scale + (1.2 if bar else 0.3)),
                                max(2.5, h * scale + 0.6)))
     im = ax[0, 0].imshow(a, cmap=cmap, vmin=lo if vmin is None else vmin,
                          vmax=hi if vmax is None else vmax, interpolation="nearest")
     ax[0, 0].set_axis_off()
     if title:
         ax[0, 0].set_title(title)
-    if colorbar:
-        fig.colorbar(im, ax=ax[0, 0], fraction=0.046, pad=0.04)
+    if colorbar or colorbar_label:
+        fig.colorbar(im, ax=ax[0, 0], fraction=0.046, pad=0.04, label=colorbar_label)
     return save_figure(fig, path, dpi=dpi)
 
 
@@ -95,11 +97,13 @@ def save_panel(path: str | Path, images: Sequence[tuple[str, np.ndarray]] | Mapp
                ncols: int | None = None, cmap: str = "gray", shared_range: bool = True,
                suptitle: str | None = None,
                boxes: Sequence[tuple[float, float, float, float]] | None = None,
-               dpi: int = 110) -> Path:
+               colorbar_label: str | None = None, dpi: int = 110) -> Path:
     """Images side by side, each with its title; one intensity range for all if ``shared_range``.
 
     images: list of (title, 2-D array) or a mapping title -> array; boxes: rectangles
-    ``(y0, y1, x0, x1)`` in pixels drawn on every panel.
+    ``(y0, y1, x0, x1)`` in pixels drawn on every panel; colorbar_label: draw one colour bar
+    for the shared range with this label (its units, e.g. ``"intensity (DN)"``). Panels of
+    arrays of one shape are drawn at one size.
     """
     items = list(images.items()) if isinstance(images, Mapping) else list(images)
     if not items:
@@ -108,20 +112,27 @@ def save_panel(path: str | Path, images: Sequence[tuple[str, np.ndarray]] | Mapp
     n = len(items)
     ncols = n if ncols is None else max(1, min(int(ncols), n))
     nrows = math.ceil(n / ncols)
-    fig, axes = new_figure(nrows, ncols, size=(3.6 * ncols, 3.6 * nrows + 0.4))
+    bar = colorbar_label is not None and shared_range
+    fig, axes = new_figure(nrows, ncols, size=(3.6 * ncols + (0.8 if bar else 0),
+                                               3.6 * nrows + 0.4))
+    if bar:
+        fig.set_layout_engine("constrained")
     shared = _finite_range(arrays)
+    im = None
     for i, ax in enumerate(axes.ravel()):
         ax.set_axis_off()
         if i >= n:
             continue
         lo, hi = shared if shared_range else _finite_range([arrays[i]])
-        ax.imshow(arrays[i], cmap=cmap, vmin=lo, vmax=hi, interpolation="nearest")
+        im = ax.imshow(arrays[i], cmap=cmap, vmin=lo, vmax=hi, interpolation="nearest")
         ax.set_title(str(items[i][0]), fontsize=10)
         for y0, y1, x0, x1 in boxes or ():
             ax.add_patch(_rect(y0, y1, x0, x1))
+    if bar:
+        fig.colorbar(im, ax=list(axes.ravel()), fraction=0.025, pad=0.02, label=colorbar_label)
     if suptitle:
         fig.suptitle(suptitle)
-    return save_figure(fig, path, dpi=dpi)
+    return save_figure(fig, path, dpi=dpi, tight=not bar)
 
 
 def _rect(y0, y1, x0, x1, color: str = "tab:red"):

@@ -151,7 +151,7 @@ def write_evaluation(out_dir: str | Path, result: dict, fm: FieldMTF | None = No
                      image=None, truth=None, name: str = "evaluation") -> list[Path]:
     """Write ``<name>.json``, ``<name>.csv`` (per-ROI table), ``<name>.txt`` (summary) and the
     figures (``mtf_curves.png``, ``mtf50_field.png``, ``images.png``) into ``out_dir``."""
-    from metasensor.io.figures import save_panel
+    from metasensor.io.figures import save_image, save_panel
     from metasensor.metrics.plots import plot_field_map, plot_mtf_curves
 
     out = Path(out_dir)
@@ -170,8 +170,12 @@ def write_evaluation(out_dir: str | Path, result: dict, fm: FieldMTF | None = No
                        ("result - truth", np.asarray(image, float) - np.asarray(truth, float))]
         boxes = [tuple(r) for r in fm.rois] if fm is not None else None
         written.append(save_panel(out / "images.png", panels[:2], boxes=boxes,
-                                  shared_range=False))
+                                  colorbar_label="intensity (image units)",
+                                  suptitle="{1} x {0} px".format(*panels[0][1].shape)))
         if truth is not None:
-            written.append(save_panel(out / "difference.png", panels[2:], cmap="RdBu_r",
-                                      shared_range=False))
+            diff = panels[2][1]
+            peak = float(np.max(np.abs(diff))) or 1.0  # symmetric: white is no difference
+            written.append(save_image(out / "difference.png", diff, cmap="RdBu_r", vmin=-peak,
+                                      vmax=peak, title="result - truth",
+                                      colorbar_label="difference (image units)"))
     return written

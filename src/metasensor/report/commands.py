@@ -32,6 +32,8 @@ def register(app: typer.Typer) -> None:
 
         Example: metasensor demo --out demo/ ; metasensor demo --scenario telescope --out tel/
         """
+        import warnings
+
         from metasensor.report.demo import DemoSettings, run_demo
         from metasensor.scenarios import SCENARIOS, run_scenario
 
@@ -53,8 +55,15 @@ def register(app: typer.Typer) -> None:
             by, bx = (int(v) for v in blocks.lower().split("x"))
         except ValueError:
             raise ValueError(f"--blocks must look like 4x4, got {blocks!r}") from None
-        summary = run_demo(out, DemoSettings(size=size, scan=scan, snr_db=snr, blocks=(by, bx),
-                                             seed=seed))
+
+        def say(message, *_args, **_kwargs) -> None:  # a warning: one line, before the wait
+            typer.echo(f"warning: {message}", err=True)
+
+        with warnings.catch_warnings():
+            warnings.showwarning = say
+            warnings.simplefilter("always", UserWarning)
+            summary = run_demo(out, DemoSettings(size=size, scan=scan, snr_db=snr,
+                                                 blocks=(by, bx), seed=seed))
         for row in summary["table"]:
             typer.echo("  ".join(f"{k}={v:.3f}" if isinstance(v, float) else f"{k}={v}"
                                  for k, v in row.items()))

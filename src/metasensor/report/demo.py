@@ -22,7 +22,13 @@ import numpy as np
 from metasensor.config import SystemConfig
 from metasensor.io.atomic import atomic_write_text
 
-__all__ = ["DemoSettings", "run_demo", "sensor_field_zernike"]
+__all__ = ["DemoSettings", "run_demo", "sensor_field_zernike", "demo_warnings"]
+
+# below these the demo runs but cannot be judged: the chart's finest bar groups and the star's
+# centre are finer than a small field resolves, and small blocks are narrower than the PSF
+# windows of the aberrated field
+MIN_JUDGE_SIZE = 256
+MIN_JUDGE_BLOCK = 96
 
 
 @dataclass(frozen=True)
@@ -76,6 +82,30 @@ def sensor_field_zernike(fz_sensor, cfg: SystemConfig, sensor_shape: tuple[int, 
     return fz
 
 
+def demo_warnings(s: DemoSettings) -> list[str]:
+    """Why a demo of these settings would mislead (empty when it can be judged)."""
+    side = min(s.size // b for b in s.blocks)
+    if s.size >= MIN_JUDGE_SIZE and side >= MIN_JUDGE_BLOCK:
+        return []
+    return [f"a {s.size}-px chart in {s.blocks[0]}x{s.blocks[1]} blocks ({side}-px blocks) is "
+            f"too small to judge the sensor: the finest bar groups and the star's centre are "
+            f"finer than such a field resolves (they come out flat) and the blocks are narrower "
+            f"than the aberrated PSFs; use --size {MIN_JUDGE_SIZE} or more (default 384) with "
+            f"blocks of {MIN_JUDGE_BLOCK} px or more"]
+
+
+def _on_grid(image: np.ndarray, shift: int, shape: tuple[int, int]) -> np.ndarray:
+    """``image`` on another reconstruction grid: target pixel (i, j) is source pixel
+    (i + shift, j + shift) (grids of different scan periods start at different sensor
+    pixels, docs/conventions.md); NaN where the source has no pixel."""
+    out = np.full(shape, np.nan, np.float32)
+    h, w = image.shape
+    ys, xs = slice(max(0, -shift), min(shape[0], h - shift)), \
+        slice(max(0, -shift), min(shape[1], w - shift))
+    out[ys, xs] = image[ys.start + shift:ys.stop + shift, xs.start + shift:xs.stop + shift]
+    return out
+
+
 def _zoom_boxes(shape: tuple[int, int], side: int) -> dict[str, tuple[int, int, int, int]]:
     h, w = shape
     s = min(side, h // 2, w // 2)
@@ -99,33 +129,84 @@ def _mtf_centre_edge(image: np.ndarray, truth: np.ndarray) -> dict:
     try:
         res = field_mtf(image, reference=truth)
     except ValueError as exc:
-        return {"error": str(exc)}
+        return {"mtf_note": f"no MTF measured ({exc})"}
     summary = res.summary()
-    return {k: (float(v) if isinstance(v, (float, np.floating)) else v)
-            for k, v in summary.items()}
+    out = {k: (float(v) if isinstance(v, (float, np.floating)) else v)
+           for k, v in summary.items()}
+    if summary["n_measured"] == 0:
+        out["mtf_note"] = (f"none of the {summary['n_rois']} slanted edges gave an MTF50 (the "
+                           "edge response never fell to half contrast)")
+    return out
+
+
+def _quality_table(results: dict) -> list[dict]:
+    """PSNR (dB), SSIM and MTF50 (cycles/pixel) of each sensor's image against its truth."""
+    from metasensor.metrics import psnr, ssim
+
+    table = []
+    for name, (img, truth) in results.items():
+        rng = float(truth.max() - truth.min())
+        row = {"sensor": name, "psnr_db": psnr(truth=truth, image=img, data_range=rng),
+               "ssim": ssim(truth=truth, image=img, data_range=rng)}
+        row.update({k: v for k, v in _mtf_centre_edge(img, truth).items()
+                    if k in ("centre_mtf50", "edge_mtf50", "mtf_note")})
+        table.append(row)
+    return table
+
+
+def _figures(out: Path, cap, lf, results: dict, zoom: int) -> dict:
+    """The full field and three zooms, every image on the meta-imaging capture's pixel grid
+    (so all panels have one size), one intensity range and colour bar (DN)."""
+    from metasensor.io.figures import save_panel
+
+    lo, hi = float(cap.truth.min()), float(cap.truth.max())
+    shift = cap.config.field_offset_px - lf.config.field_offset_px  # lf pixel - cap pixel
+    panel = [("ground truth", cap.truth)] + [
+        (k, np.clip(_on_grid(v[0], shift, cap.truth.shape) if v[1] is lf.truth else v[0],
+                    lo, hi)) for k, v in results.items()]
+    units = dict(colorbar_label="intensity (DN)", ncols=4)
+    h, w = cap.truth.shape
+    figs = {"full field": save_panel(
+        out / "full_field.png", panel, suptitle=f"Single plastic lens, f/10, strong field "
+        f"aberrations ({w} x {h} px)", **units)}
+    for label, box in _zoom_boxes(cap.truth.shape, zoom).items():
+        crops = [(t, _crop(a, box)) for t, a in panel]
+        figs[label] = save_panel(out / f"zoom_{label.replace(' ', '_')}.png", crops,
+                                 suptitle=f"zoom: {label} ({box[3] - box[2]} x "
+                                 f"{box[1] - box[0]} px)", **units)
+    return figs
+
+
+def _check_settings(s: DemoSettings) -> None:
+    """Refuse impossible settings before any output exists."""
+    from metasensor.recon.blocks import split_blocks
+
+    SystemConfig(scan=s.scan)  # an impossible scan period fails here
+    if not math.isfinite(s.snr_db):
+        raise ValueError(f"snr_db must be a finite number of dB, got {s.snr_db!r}")
+    if min(s.blocks) < 1 or min(s.field_blocks) < 1:
+        raise ValueError(f"blocks must be >= 1 each, got {s.blocks} / {s.field_blocks}")
+    d = SystemConfig(scan=s.scan).scan_step_px  # blocks too small even for the whole scene
+    split_blocks((s.size // d * d,) * 2, s.blocks, d)
 
 
 def run_demo(out: str | Path, settings: DemoSettings | None = None, progress: bool = True) -> dict:
     """Run the whole demo and write the report into ``out``; returns the summary dict."""
+    import warnings
+
     from tqdm.auto import tqdm
 
     import metasensor as ms
-    from metasensor.io.figures import save_panel
-    from metasensor.metrics import psnr, ssim
-    from metasensor.recon.blocks import split_blocks
     from metasensor.report.html import write_html_report
     from metasensor.simulation.capture import simulate
     from metasensor.simulation.lens import SingleLens
     from metasensor.simulation.scenes import load_scene
 
     s = settings or DemoSettings()
-    SystemConfig(scan=s.scan)  # an impossible scan period fails here, before any output exists
-    if not math.isfinite(s.snr_db):
-        raise ValueError(f"snr_db must be a finite number of dB, got {s.snr_db!r}")
-    if min(s.blocks) < 1 or min(s.field_blocks) < 1:
-        raise ValueError(f"blocks must be >= 1 each, got {s.blocks} / {s.field_blocks}")
-    d = SystemConfig(scan=s.scan).scan_step_px  # blocks too small even for the whole scene:
-    split_blocks((s.size // d * d,) * 2, s.blocks, d)  # fail before simulating
+    _check_settings(s)
+    notes = demo_warnings(s)
+    for note in notes:
+        warnings.warn(note, UserWarning, stacklevel=2)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     t_start = time.perf_counter()
@@ -161,33 +242,17 @@ def run_demo(out: str | Path, settings: DemoSettings | None = None, progress: bo
     steps.set_postfix_str("measuring and writing the report")
     results = {
         "2D sensor": (cap.sensor2d, cap.truth),
-        "plain light field (1x1 scan)": (rec_lf.image, lf.truth),
+        "plain light field (1x1 scan)": (np.asarray(rec_lf.image), lf.truth),
         "meta-imaging sensor (5x5 scan)": (np.asarray(rec.image), cap.truth),
     }
     if s.scan != 5:
         results[f"meta-imaging sensor ({s.scan}x{s.scan} scan)"] = results.pop(
             "meta-imaging sensor (5x5 scan)")
-    table = []
-    for name, (img, truth) in results.items():
-        rng = float(truth.max() - truth.min())
-        row = {"sensor": name, "psnr_db": psnr(truth=truth, image=img, data_range=rng),
-               "ssim": ssim(truth=truth, image=img, data_range=rng)}
-        row.update({k: v for k, v in _mtf_centre_edge(img, truth).items()
-                    if k in ("centre_mtf50", "edge_mtf50")})
-        table.append(row)
-
-    figs = {}
-    lo, hi = float(cap.truth.min()), float(cap.truth.max())
-    panel = [("ground truth", cap.truth)] + [(k, np.clip(v[0], lo, hi)) for k, v in
-                                            results.items()]
-    figs["full field"] = save_panel(out / "full_field.png", panel, ncols=4,
-                                    suptitle="Single plastic lens, f/10, strong field aberrations")
-    for label, box in _zoom_boxes(cap.truth.shape, s.size // 5).items():
-        crops = [(t, _crop(a, box)) for t, a in panel]
-        figs[label] = save_panel(out / f"zoom_{label.replace(' ', '_')}.png", crops, ncols=4,
-                                 suptitle=f"zoom: {label}")
+    table = _quality_table(results)
+    figs = _figures(out, cap, lf, results, s.size // 5)
     seconds = time.perf_counter() - t_start
     summary = {
+        "warnings": notes,
         "settings": {k: v for k, v in s.__dict__.items() if k != "extra"},
         "config": cfg.to_dict(),
         "table": table,

@@ -267,8 +267,13 @@ def _calibration_figure(frame: np.ndarray, calib, path: Path) -> None:
     axes[0].set_title(f"pitch {calib.pitch:.4f} px, rotation {calib.rotation:+.4f} deg")
     err = calib.offset_errors()
     phases = np.array(calib.scan_order)
-    axes[1].quiver(phases[:, 1], phases[:, 0], err[:, 1], err[:, 0], angles="xy",
-                   scale_units="xy", scale=max(1e-3, 2 * np.abs(err).max()))
+    peak = float(np.abs(err).max())
+    q = axes[1].quiver(phases[:, 1], phases[:, 0], err[:, 1], err[:, 0], angles="xy",
+                       scale_units="xy", scale=max(1e-3, 2 * peak))
+    key = float(f"{max(peak, 1e-3):.1g}")  # arrows are magnified: the key gives their length
+    axes[1].quiverkey(q, 0.02, -0.12, key, f"{key:g} px", labelpos="E", coordinates="axes")
+    axes[0].set_xlabel("sensor column (px)")
+    axes[0].set_ylabel("sensor row (px)")
     axes[1].set_xlim(-0.5, calib.scan - 0.5)
     axes[1].set_ylim(calib.scan - 0.5, -0.5)
     axes[1].set_title("scan-phase offset, measured - nominal (max "
