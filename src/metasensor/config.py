@@ -33,21 +33,18 @@ class ConfigError(ValueError):
 
 
 def toml_value(value: Any) -> str:
-    """One TOML value (bool, int, float with exact repr, str, list); ConfigError otherwise."""
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, int):
-        return str(value)
-    if isinstance(value, float):
-        if math.isnan(value) or math.isinf(value):
-            raise ConfigError(f"cannot write non-finite value {value!r} to TOML")
-        text = repr(value)
-        return text if any(ch in text for ch in ".eE") else text + ".0"
-    if isinstance(value, str):
-        return json.dumps(value)
+    """One TOML value (bool, int, float with exact repr, str, list): scalars written by
+    ``tomli_w``, arrays kept on one line (tomli_w puts every item on its own line);
+    ConfigError for non-finite numbers and other types."""
+    import tomli_w
+
     if isinstance(value, (tuple, list)):
         return "[" + ", ".join(toml_value(v) for v in value) + "]"
-    raise ConfigError(f"cannot write value of type {type(value).__name__} to TOML")
+    if isinstance(value, float) and not math.isfinite(value):
+        raise ConfigError(f"cannot write non-finite value {value!r} to TOML")
+    if not isinstance(value, (bool, int, float, str)):
+        raise ConfigError(f"cannot write value of type {type(value).__name__} to TOML")
+    return tomli_w.dumps({"v": value}).strip().removeprefix("v = ")
 
 
 @dataclass(frozen=True)

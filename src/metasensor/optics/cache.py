@@ -1,11 +1,14 @@
 """On-disk cache of PSF banks, keyed by a SHA-256 of everything a bank depends on.
 
 Location: the environment variable ``METASENSOR_CACHE`` if set, else the folder given to
-:func:`set_cache_dir`, else ``~/.cache/metasensor``. Entries are ``.npy`` files written to a
-temporary name in the same folder and renamed with ``os.replace`` (atomic), so concurrent
-writers and readers never see a partial file (two writers of one key write the same bytes; the
-last rename wins); a corrupt entry counts as a miss and is removed. A cache folder that cannot
-be written (read-only, full) only costs the caching: the computation goes on.
+:func:`set_cache_dir`, else the platform's user cache folder (``platformdirs``:
+``~/.cache/metasensor`` on Linux or ``$XDG_CACHE_HOME/metasensor``,
+``~/Library/Caches/metasensor`` on macOS, ``%LOCALAPPDATA%\\metasensor\\Cache`` on Windows).
+Entries are ``.npy`` files written to a temporary name in the same folder and renamed with
+``os.replace`` (atomic), so concurrent writers and readers never see a partial file (two writers
+of one key write the same bytes; the last rename wins); a corrupt entry counts as a miss and is
+removed. A cache folder that cannot be written (read-only, full) only costs the caching: the
+computation goes on.
 ``stats`` counts hits and misses in this process (for tests and benchmarks).
 
 Size: the folder is kept under ``METASENSOR_CACHE_MAX_GB`` GiB (default
@@ -49,7 +52,9 @@ def cache_dir() -> Path:
         return Path(env).expanduser()
     if _setting is not None:
         return _setting
-    return Path.home() / ".cache" / "metasensor"
+    from platformdirs import user_cache_dir
+
+    return Path(user_cache_dir("metasensor", appauthor=False))
 
 
 def max_bytes() -> float:
