@@ -10,12 +10,15 @@ Rows: command, seconds, longest gap (s), the last output before that gap.
 
 from __future__ import annotations
 
+import fcntl
 import os
 import pty
 import select
+import struct
 import subprocess
 import sys
 import tempfile
+import termios
 import time
 from pathlib import Path
 
@@ -40,8 +43,10 @@ def watch(args: list[str], cwd: str) -> dict:
     """Run ``metasensor ARGS`` on a pseudo-terminal (progress bars draw as they do for a
     person) and time the silences in its output."""
     env = {**os.environ, "PYTHONPATH": SRC + os.pathsep + os.environ.get("PYTHONPATH", ""),
-           "OMP_NUM_THREADS": "1", "PYTHONUNBUFFERED": "1", "COLUMNS": "100"}
+           "OMP_NUM_THREADS": "1", "PYTHONUNBUFFERED": "1"}
     master, slave = pty.openpty()
+    # a terminal of 100 x 30 characters: with no size set, progress bars draw nothing
+    fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", 30, 100, 0, 0))
     t0 = time.perf_counter()
     proc = subprocess.Popen([sys.executable, "-m", "metasensor.cli", *args], cwd=cwd, env=env,
                             stdin=subprocess.DEVNULL, stdout=slave, stderr=slave)

@@ -60,6 +60,8 @@ def run_depth(views: Path, out: Path, system: Path | None = None, config: Path |
     res = estimate_depth(stack, cfg, calibration=system, candidates=candidates,
                          disparity_range=_parse_range(disparity_range), occlusion=occlusion,
                          radius=radius, device=device, progress=progress)
+    if progress:
+        typer.echo(f"writing the depth maps and figure to {out} ...", err=True)
     staged = StagedFolder(out, names)  # the folder appears complete, or not at all
     maps = {"disparity": res.disparity, "confidence": res.confidence,
             "image_depth": res.image_depth}

@@ -279,6 +279,11 @@ def simulate(scene, cfg: SystemConfig, zernike=None, field_zernike=None, depth=N
     banks = _Banks(cfg, dev, upsample, psf)
     reference = scene if motion is None else motion.reference_scene(scene)
 
+    # progress at the steps a person waits on (the PSF banks show their own bar on a terminal)
+    steps = tqdm(total=3 if comparison else 2, desc="simulate", unit="step",
+                 disable=not progress)
+    steps.set_postfix_str(f"views: {len(comps)} PSF bank(s)")
+
     # ---- clean views (scene units)
     views = torch.zeros((n * n, ly * p, lx * p), dtype=torch.float32, device=dev)
     if motion is None and turbulence is None:
@@ -302,6 +307,9 @@ def simulate(scene, cfg: SystemConfig, zernike=None, field_zernike=None, depth=N
         scale = exposure * (2**bits - 1) / peak if peak > 0 else 1.0
     clean *= np.float32(scale)
 
+    steps.update()
+    steps.set_postfix_str("noise and raw frames")
+
     # ---- noise, quantisation, raw frames
     noisy, model = add_noise(clean, snr_db, photons, read_noise, bits, seeds[0])
     frames = unrealign(noisy.astype(np.uint16), cfg, order, moving="mla", frame_shape=shape)
@@ -322,9 +330,13 @@ def simulate(scene, cfg: SystemConfig, zernike=None, field_zernike=None, depth=N
                   snr_db=measure_snr(clean, views_noisy), offset=o, field_zernike=grid,
                   depth_planes=None if depth is None else planes, phase_screens=screens,
                   options=options)
+    steps.update()
     if comparison:
+        steps.set_postfix_str("2D sensor and hardware AO")
         _comparison_sensors(cap, reference, comps, grid, zernike, field_zernike, banks,
                             screens, tref, ao_segments, seeds, dev)
+        steps.update()
+    steps.close()
     return cap
 
 

@@ -164,6 +164,7 @@ def register(app: typer.Typer) -> None:
         cap = simulate(img, cfg, zernike=z, field_zernike=field, scan=scan, scan_order=order,
                        snr_db=snr, seed=seed, photons=photons, read_noise=read_noise,
                        bit_depth=bits, device=device, progress=True)
+        typer.echo(f"writing the capture to {out} ...", err=True)
         staged = StagedFolder(out, CAPTURE_FILES)  # the folder appears complete, or not at all
         files = write_capture(cap, staged.path, clean=clean)
         staged.commit()
