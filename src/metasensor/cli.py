@@ -36,7 +36,8 @@ _COMMANDS: dict[str, tuple[str, str]] = {
     "evaluate": ("metrics.commands", "PSNR, SSIM and slanted-edge MTF (ISO 12233) of a result "
                  "image."),
     "demo": ("report.commands", "Simulate the built-in resolution chart through a cheap single "
-             "lens, reconstruct it, and write a report (PNG figures, index.html, summary.json)."),
+             "lens, reconstruct it, and write a report (PNG figures, index.html, summary.json); "
+             "or run one of the paper's experiments with --scenario."),
 }
 _COMMAND_MODULES = tuple(dict.fromkeys(module for module, _ in _COMMANDS.values()))
 
