@@ -1,7 +1,7 @@
 """One wave-DAO iteration on a block: seconds, and the ratio to the FFTs it needs (same run).
 
 One iteration = the intermediate image, the forward prediction of every view and the sub-pixel
-shift measurement (:class:`metasensor.recon.dao_block.DaoBlock`), for both estimators of the
+shift measurement (:class:`metasensor.dao.block.DaoBlock`), for both estimators of the
 image: "isa" (the default: the block's phase-space Richardson–Lucy, 5 iterations, 16 subsets; its
 FFT reference counts 5 per-view full-size convolution pairs, as a conventional ISA needs them)
 and "views" (the paper's: Krishnan–Fergus deconvolution of every used view, 113 for the
@@ -16,7 +16,7 @@ shift precisions that weight the Zernike fit (once per update: one
 real FFT pair per view on the scan-step grid, 1/9 of the pixel grid's area for a 5×5 scan).
 
 The PSFs are those of a 1 λ r.m.s. random aberration (modes 4–45, seed 0), on two windows: the
-DAO default (``psf_size="auto"``, :func:`metasensor.recon.dao.psf_window`: ray reach over the
+DAO default (``psf_size="auto"``, :func:`metasensor.dao.estimate.psf_window`: ray reach over the
 used views + one lenslet + 10 λ/NA) and ``view_psfs``' default (99.5 % of all views' light,
 K = 413 here). Accuracy of the two windows: ``run_dao`` (3 updates) on a simulated 1 λ capture
 (the simulator's own full-window, 3×-subsampled PSFs), residual r.m.s. of modes 4–45.
@@ -71,8 +71,8 @@ def _iteration(cfg, bank, size: int, dev, rng, estimator: str = "views") -> dict
     import torch
     from scipy.ndimage import gaussian_filter
 
-    from metasensor.recon.dao_block import DaoBlock
-    from metasensor.recon.fastdeconv import beta_schedule
+    from metasensor.dao.block import DaoBlock
+    from metasensor.solvers.krishnan_fergus import beta_schedule
 
     d = cfg.scan_step_px
     h = size // d
@@ -111,8 +111,8 @@ def _iteration(cfg, bank, size: int, dev, rng, estimator: str = "views") -> dict
 
 def _accuracy(cfg, z, windows) -> list[dict]:
     import metasensor as ms
-    from metasensor.recon.dao import run_dao
-    from metasensor.recon.wavefront import zernike_rms
+    from metasensor.dao.estimate import run_dao
+    from metasensor.dao.wavefront import zernike_rms
     from metasensor.simulation.scenes import load_scene
 
     cap = ms.simulate(load_scene("camera", 255), cfg, zernike=z, snr_db=30, seed=0,
@@ -131,8 +131,8 @@ def _accuracy(cfg, z, windows) -> list[dict]:
 def run(quick: bool = False) -> list[dict]:
     import metasensor as ms
     from metasensor.backend import resolve_device
+    from metasensor.dao.estimate import psf_window
     from metasensor.optics.zernike import random_zernike
-    from metasensor.recon.dao import psf_window
 
     cfg = ms.SystemConfig()
     dev = resolve_device(None)

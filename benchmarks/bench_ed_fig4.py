@@ -15,7 +15,7 @@ wave above the 2D sensor at every level.
 PSF windows (the cost driver). ``view_psfs``' default window keeps 99.5 % of the light of all
 225 views and is sized by the ray reach at the pupil rim (K = 341-413 at 1 λ, ~900 at 3 λ, whose
 3×-subsampled simulation bank would not fit in memory). Here every bank is sized from the ray
-reach over the 113 used views (:func:`metasensor.recon.dao.psf_window`): the reconstructions
+reach over the 113 used views (:func:`metasensor.dao.estimate.psf_window`): the reconstructions
 (oracle, geometric, wave) use that window, the simulation (3×-subsampled, a different grid) a
 window ``SIM_EXTRA`` pixels wider on each side, so the data hold light the models drop, up to
 ``SIM_MAX`` = 401 px (memory): at 3 λ (reach ≈ 160-190 px) the simulation window is then the
@@ -59,7 +59,7 @@ def sim_bank(cfg, zernike=None, depth=0.0, phase=None, device=None):
     """The simulator's fine bank (``view_psfs(subsample=3) · 9``, as its default) on a window
     ``SIM_EXTRA`` px per side wider than the reconstructions' :func:`psf_window`."""
     import metasensor as ms
-    from metasensor.recon.dao import psf_window
+    from metasensor.dao.estimate import psf_window
 
     size = min(psf_window(cfg, zernike) + 2 * SIM_EXTRA, SIM_MAX)
     kw = {} if phase is None else {"phase": phase, "cache": False}
@@ -113,10 +113,10 @@ def one_case(scene_name: str, rms: float, draw: int, size: int, max_iter: int,
     """One capture (``snr_db``, aberration ``rms`` draw ``draw``, ``size`` px) and its rows: 2D
     sensor, hardware AO, the oracle ISA and DAO by each of ``methods``."""
     import metasensor as ms
+    from metasensor.dao.estimate import block_psfs, psf_window, run_dao
+    from metasensor.dao.wavefront import zernike_rms
     from metasensor.metrics import psnr, ssim
     from metasensor.optics.zernike import random_zernike
-    from metasensor.recon.dao import block_psfs, psf_window, run_dao
-    from metasensor.recon.wavefront import zernike_rms
     from metasensor.simulation.scenes import load_scene
 
     cfg = ms.SystemConfig()

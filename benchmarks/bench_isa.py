@@ -1,4 +1,4 @@
-"""ISA speed (phase-space Richardson–Lucy, and the default sparse-gradient solver ``recon.hqs``):
+"""ISA speed (phase-space Richardson–Lucy, and the default sparse-gradient solver ``solvers.hqs``):
 wall time vs the time of the FFTs it needs.
 
 Full mode (the issue): 2,010 x 2,010-pixel output (134 x 134 lenslets, nnum 15, 5x5 scan, d = 3),
@@ -47,8 +47,8 @@ def psf_bank(cfg):
 
 def _problem(lenslets: int, device):
     from metasensor.config import SystemConfig
-    from metasensor.recon.forward import PhaseSpaceOperator, make_geometry
-    from metasensor.recon.isa import view_order
+    from metasensor.phasespace.operator import PhaseSpaceOperator, make_geometry
+    from metasensor.solvers.richardson_lucy import view_order
 
     cfg = SystemConfig()
     bank, source = psf_bank(cfg)
@@ -118,7 +118,7 @@ def _fft_times(op, n_subsets: int, iterations: int) -> tuple[float, float]:
 
 
 def _speed_rows(lenslets: int, iterations: int, variants, device) -> list[dict]:
-    from metasensor.recon.isa import richardson_lucy
+    from metasensor.solvers.richardson_lucy import richardson_lucy
 
     op, data, mask, otf_s, source, _ = _problem(lenslets, device)
     rows = []
@@ -139,16 +139,17 @@ def _speed_rows(lenslets: int, iterations: int, variants, device) -> list[dict]:
 
 
 def _hqs_row(lenslets: int, device) -> dict:
-    """The default solver (recon.hqs) on the same problem: wall time, the RL wall time of the
+    """The default solver (solvers.hqs) on the same problem: wall time, the RL wall time of the
     same run (5 iterations, 16 subsets), and the FFTs it needs: its forward/adjoint calls (each
     half of an RL iteration's simultaneous FFTs), its folded-normal solves and applies (a complex
     FFT2 pair of the domain each), the margin bands' forward/adjoint pairs
-    (:mod:`metasensor.recon.masked_normal`: an RL iteration's FFTs on each band's domain), and the
+    (:mod:`metasensor.phasespace.masked_normal`: an RL iteration's FFTs on each band's domain),
+    and the
     folded normal's build (one complex FFT2 of the domain per view)."""
-    from metasensor.recon import hqs
-    from metasensor.recon.isa import richardson_lucy
-    from metasensor.recon.masked_normal import BandNormal
-    from metasensor.recon.normal import FoldedNormal
+    from metasensor.phasespace.masked_normal import BandNormal
+    from metasensor.phasespace.normal import FoldedNormal
+    from metasensor.solvers import hqs
+    from metasensor.solvers.richardson_lucy import richardson_lucy
 
     op, data, mask, _, source, psf = _problem(lenslets, device)
     counts = {"forward": 0, "adjoint": 0, "solve": 0, "apply": 0, "band_normal": 0}
@@ -207,10 +208,10 @@ def _quality_rows(iterations: int) -> list[dict]:
     from skimage.metrics import structural_similarity
 
     import metasensor as ms
-    from metasensor.recon.forward import PhaseSpaceOperator, make_geometry
-    from metasensor.recon.isa import richardson_lucy, subset_major, view_order
+    from metasensor.phasespace.operator import PhaseSpaceOperator, make_geometry
     from metasensor.simulation.capture import simulate
     from metasensor.simulation.scenes import natural_image, resolution_chart
+    from metasensor.solvers.richardson_lucy import richardson_lucy, subset_major, view_order
 
     spec = importlib.util.spec_from_file_location("bsp", HERE / "bench_scan_period.py")
     bsp = importlib.util.module_from_spec(spec)

@@ -2,7 +2,7 @@
 
 Two studies with the library's PSF bank (5x5 scan, 113 views, aberration-free):
 
-1. Spectrum of the measurement (:class:`metasensor.recon.normal.FoldedNormal`): per view
+1. Spectrum of the measurement (:class:`metasensor.phasespace.normal.FoldedNormal`): per view
    frequency the d² eigenvalues of AᵀA (squared singular values). Rows per scan period: the
    fraction of directions below 1e-6 / 1e-4 / 1e-2 of the largest, and the null directions per
    frequency (a 1x1 scan has more aliases, 225, than views, 113).
@@ -31,8 +31,8 @@ LAMS = (1e-7, 1e-6, 1e-5, 1e-4, 1e-3, 1e-2, 3e-2, 0.1, 0.3)
 
 def _spectrum_rows(quick: bool) -> list[dict]:
     import metasensor as ms
-    from metasensor.recon.forward import PhaseSpaceOperator, make_geometry
-    from metasensor.recon.normal import FoldedNormal
+    from metasensor.phasespace.normal import FoldedNormal
+    from metasensor.phasespace.operator import PhaseSpaceOperator, make_geometry
 
     rows = []
     for scan in (1, 3, 5) if quick else (1, 3, 5, 15):
@@ -68,10 +68,10 @@ def _quality_rows(quick: bool) -> list[dict]:
     from skimage.metrics import structural_similarity
 
     import metasensor as ms
-    from metasensor.recon.forward import PhaseSpaceOperator, make_geometry
-    from metasensor.recon.isa import richardson_lucy
-    from metasensor.recon.normal import FoldedNormal, tikhonov
+    from metasensor.phasespace.normal import FoldedNormal, tikhonov
+    from metasensor.phasespace.operator import PhaseSpaceOperator, make_geometry
     from metasensor.simulation.scenes import natural_image, resolution_chart
+    from metasensor.solvers.richardson_lucy import richardson_lucy
 
     cfg = ms.SystemConfig()
     psf = np.asarray(ms.view_psfs(cfg), np.float32)[cfg.view_mask()]

@@ -6,7 +6,7 @@ the capture does not have (Z4: an object that far off the assumed focus, or an a
 that far off; 0.05 λ moves the outer views by ~0.8 px). Three variants per error:
 
 * ``hqs``: the sparse-gradient solver after view registration (``register=True``,
-  :mod:`metasensor.recon.register`);
+  :mod:`metasensor.dao.bank_registration`);
 * ``hqs_unregistered``: the same solver alone (the default);
 * ``rl``: Richardson–Lucy, 5 iterations (the authors' algorithm).
 

@@ -3,7 +3,7 @@
 For each scene (the built-in chart and grey natural images) and size, the simulator captures the
 field aberration-free, 5 x 5 scan, SNR 30 dB (seed 0; seeds 1-2 moved SSIM by <= 0.002), and
 ``ms.reconstruct(views, cfg, method="isa", zernike=None, field_zernike=None, blocks=(1, 1),
-overlap=20, iterations=None, device=None)`` reconstructs it (the default solver, ``recon.hqs``).
+overlap=20, iterations=None, device=None)`` reconstructs it (the default solver, ``solvers.hqs``).
 SSIM (skimage, data_range of the truth) and PSNR against ``cap.truth``, next to the capture's own
 2D sensor (same lens and SNR: ``sensor2d``; ``sensor2d_clean`` without noise), as a yardstick
 of what the scene's detail at that size costs.

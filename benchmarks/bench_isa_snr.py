@@ -5,7 +5,7 @@ SNR for two natural images: the camera at 192 px (the slow test's field, 180 tru
 at 512 px (495 truth px, the natural image closest to the target at 30 dB). Each capture is
 aberration-free, 5 x 5 scan, seed 0, at SNR 30 / 35 / 40 / 50 / 60 dB and without photon or
 read noise (``snr_target`` None: quantisation only, the 12-bit sensor's 72-76 dB), reconstructed
-by the contract call (the default solver, ``recon.hqs``). SSIM (skimage, data_range of the
+by the contract call (the default solver, ``solvers.hqs``). SSIM (skimage, data_range of the
 truth) against ``cap.truth``, next to the capture's own 2D sensor at the same SNR.
 
 What it shows: the noise is not the camera's only limit. Its SSIM still stops at 0.89 without

@@ -50,7 +50,7 @@ def truth_scale(cap, bank) -> float:
     """Σ views_clean / Σ S_d(H ⊛ truth) over the interior of the centre view."""
     import torch
 
-    from metasensor.recon.forward import PhaseSpaceOperator, make_geometry
+    from metasensor.phasespace.operator import PhaseSpaceOperator, make_geometry
 
     cfg = cap.config
     c = cfg.center

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 import metasensor as ms
-from metasensor.recon.dao import run_dao
+from metasensor.dao.estimate import run_dao
 from metasensor.simulation.scenes import load_scene
 
 CFG5 = ms.SystemConfig(nnum=5, scan=5)

@@ -20,7 +20,7 @@ import pytest
 import torch
 
 import metasensor as ms
-from metasensor.recon.system import SystemAberration
+from metasensor.dao.system_aberration import SystemAberration
 from metasensor.simulation.scenes import load_scene
 
 Z = np.zeros(12, np.float32)

@@ -25,7 +25,7 @@ _COMMANDS: dict[str, tuple[str, str]] = {
                   "field, scan offsets)."),
     "realign": ("sensor.commands", "Realign raw frames into view stacks (page u*nnum + v = view "
                 "(u, v))."),
-    "calibrate-aberration": ("recon.dao_commands", "Global system-aberration calibration from a "
+    "calibrate-aberration": ("dao.commands", "Global system-aberration calibration from a "
                              "textured capture (e.g. a checkerboard)."),
     "reconstruct": ("recon.commands", "Reconstruct the all-in-focus image from views (ISA; "
                     "multisite blocks through Dask)."),

@@ -110,9 +110,9 @@ def test_calibrated_warp_reduces_depth_error_by_30_percent():
 
 
 def test_calibration_file_of_the_dao_stage(tmp_path):
-    # a SystemAberration (recon.system) holding the shifts on a coarse 9 x 9 grid, saved as
+    # a SystemAberration (dao.system_aberration) holding the shifts on a coarse 9 x 9 grid, saved as
     # system.h5 and passed by path: loaded lazily, resampled, and it still removes the error
-    from metasensor.recon.system import SystemAberration
+    from metasensor.dao.system_aberration import SystemAberration
 
     sv, maps, hv, raw = _aberrated_scene()
     idx = np.linspace(0, hv - 1, 9).round().astype(int)

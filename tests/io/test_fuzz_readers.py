@@ -15,10 +15,10 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import metasensor as ms
+from metasensor.dao.system_aberration import SystemAberration
 from metasensor.io.raw import open_raw, write_raw
 from metasensor.io.views import read_config_from_views, read_views, write_views
 from metasensor.optics.psf_io import load_psf, read_npy, save_psf
-from metasensor.recon.system import SystemAberration
 from metasensor.sensor.calibration import Calibration
 
 CFG = ms.SystemConfig(nnum=3, mla_pitch=3 * 4.6e-6, mla_focal=3 * 46e-6, scan=3)

@@ -5,10 +5,10 @@ import types
 
 import numpy as np
 import pytest
-from recon_standin import one_torch_thread, standin_psfs, synth_views  # noqa: F401
 
 from metasensor.config import SystemConfig
 from metasensor.recon.api import reconstruct
+from recon_standin import one_torch_thread, standin_psfs, synth_views  # noqa: F401
 
 CFG = SystemConfig()
 
@@ -95,7 +95,7 @@ def test_dao_methods_use_estimated_aberration(capture, bank, monkeypatch):
         z[4] = 0.1 * len(calls)
         return z, [1.0, 0.5]
 
-    monkeypatch.setitem(sys.modules, "metasensor.recon.dao",
+    monkeypatch.setitem(sys.modules, "metasensor.dao.estimate",
                         types.SimpleNamespace(estimate_block_aberration=estimate_block_aberration))
     used = []
 
@@ -144,9 +144,9 @@ def test_bad_input(capture, bank):
 
 def test_wave_dao_bank_uses_the_used_views_window(capture, bank, monkeypatch):
     # After wave DAO (no psf / psf_fn given) the block's bank is generated at
-    # recon.dao.psf_window of the estimate, not view_psfs' all-views default window.
+    # dao.estimate.psf_window of the estimate, not view_psfs' all-views default window.
     import metasensor.recon.api as api
-    from metasensor.recon import dao as real_dao
+    from metasensor.dao import estimate as real_dao
 
     views, _ = capture
     z = np.zeros(45)
@@ -155,7 +155,7 @@ def test_wave_dao_bank_uses_the_used_views_window(capture, bank, monkeypatch):
     def estimate_block_aberration(window, cfg, method, init, device, **kw):
         return z, [1.0]
 
-    monkeypatch.setitem(sys.modules, "metasensor.recon.dao", types.SimpleNamespace(
+    monkeypatch.setitem(sys.modules, "metasensor.dao.estimate", types.SimpleNamespace(
         estimate_block_aberration=estimate_block_aberration, psf_window=real_dao.psf_window))
     sizes = []
 

@@ -2,10 +2,10 @@
 
 import numpy as np
 import pytest
-from recon_standin import gaussian_psfs, one_torch_thread, synth_views  # noqa: F401
 
 from metasensor.config import SystemConfig
 from metasensor.recon.api import reconstruct
+from recon_standin import gaussian_psfs, one_torch_thread, synth_views  # noqa: F401
 
 CFG = SystemConfig(nnum=5, scan=5)  # d = 1: small and fast
 

@@ -7,7 +7,6 @@ import h5py
 import numpy as np
 import pytest
 import tifffile
-from recon_standin import gaussian_psfs, one_torch_thread, synth_views  # noqa: F401
 from typer.testing import CliRunner
 
 from metasensor.cli import app
@@ -15,6 +14,7 @@ from metasensor.config import SystemConfig
 from metasensor.io.views import write_views
 from metasensor.optics.psf_io import parse_zernike
 from metasensor.recon.commands import read_psf_file
+from recon_standin import gaussian_psfs, one_torch_thread, synth_views  # noqa: F401
 
 CFG = SystemConfig(nnum=5, scan=5)
 
@@ -121,7 +121,7 @@ def test_psf_file_and_zernike_parsing(files):
 
 
 def test_cli_system_aberration_file_sets_the_field_map(files):
-    from metasensor.recon.system import SystemAberration
+    from metasensor.dao.system_aberration import SystemAberration
 
     grid = np.zeros((2, 2, 45))
     grid[..., 3] = 0.25  # each block's bank is made with it, and it is reported per block

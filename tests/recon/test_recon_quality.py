@@ -6,6 +6,7 @@ SSIM = metasensor.metrics.ssim (scikit-image's, with the truth's data range), PS
 
 import numpy as np
 import pytest
+
 from recon_standin import one_torch_thread  # noqa: F401
 
 pytestmark = pytest.mark.slow
@@ -45,7 +46,7 @@ def test_simulated_views_follow_the_forward_model(setup):
     # (away from light entering from outside): relative residual < 1 %, scale within 1 %.
     import torch
 
-    from metasensor.recon.forward import PhaseSpaceOperator, make_geometry
+    from metasensor.phasespace.operator import PhaseSpaceOperator, make_geometry
 
     cfg, bank, caps = setup
     cap = caps["camera"]
@@ -93,7 +94,7 @@ _CAMERA_SHORT = pytest.mark.xfail(
 
 @pytest.mark.parametrize("scene", ["chart", pytest.param("camera", marks=_CAMERA_SHORT)])
 def test_isa_ssim_090_acceptance(setup, scene):
-    # The default solver, the sparse-gradient prior (recon.hqs), called exactly as issue 5's
+    # The default solver, the sparse-gradient prior (solvers.hqs), called exactly as issue 5's
     # contract does; Richardson-Lucy gives 0.52 / 0.67 (test above). Measured: chart 0.907,
     # camera 0.779.
     import metasensor as ms

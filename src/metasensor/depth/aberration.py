@@ -8,7 +8,7 @@ is the unaberrated content at ``p``, so the corrected view is ``V'_uv(p) = V_uv(
 Accepted forms: an array ``(nnum, nnum, 2, H, W)`` (or ``(nnum, nnum, 2)`` for field-constant
 shifts); an object with ``.shift_maps(shape) -> (nnum, nnum, 2, H, W)`` (the DAO stage's
 ``SystemAberration``); or a path to its calibration file, loaded with
-``metasensor.recon.system.SystemAberration.load(path)``.
+``metasensor.dao.system_aberration.SystemAberration.load(path)``.
 """
 
 from __future__ import annotations
@@ -30,10 +30,11 @@ def resolve_shift_maps(calibration, nnum: int, shape: tuple[int, int]) -> np.nda
         if not path.exists():
             raise FileNotFoundError(f"system calibration not found: {path}")
         try:
-            from metasensor.recon.system import SystemAberration
+            from metasensor.dao.system_aberration import SystemAberration
         except ImportError:
             raise ValueError(
-                f"cannot read {path}: metasensor.recon.system.SystemAberration is not available"
+                f"cannot read {path}: metasensor.dao.system_aberration.SystemAberration is "
+                "not available"
             ) from None
         calibration = SystemAberration.load(path)
     if hasattr(calibration, "shift_maps"):

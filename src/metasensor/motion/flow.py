@@ -11,7 +11,7 @@ is ``Q = P + M`` (the paper's (x + Δx, y + Δy)).
 Flow engines: OpenCV DIS (default; measured more accurate than Farneback on aliased sub-images,
 see tests/motion) or Farneback, each initialised from the already estimated neighbouring frame
 (closer in time to the reference), which keeps large motions (many pixels per frame) in range;
-or, for turbulence, the smooth non-rigid registration of :mod:`metasensor.recon.registration`.
+or, for turbulence, the smooth non-rigid registration of :mod:`metasensor.align.nonrigid`.
 """
 
 from __future__ import annotations
@@ -158,9 +158,9 @@ def registration_flows(view: np.ndarray, order: list[tuple[int, int]], reference
                        ) -> np.ndarray:
     """Smooth per-frame motion for turbulence: non-rigid registration (control grid ``grid``,
     thinned by :func:`registration_grid` on small sub-images,
-    :func:`metasensor.recon.registration.register_nonrigid_batch`) of the reference sub-image
+    :func:`metasensor.align.nonrigid.register_nonrigid_batch`) of the reference sub-image
     onto every other sub-image. Same output as :func:`phase_flows`."""
-    from metasensor.recon.registration import register_nonrigid_batch
+    from metasensor.align.nonrigid import register_nonrigid_batch
 
     p = int(round(len(order) ** 0.5))
     subs = sub_images(np.asarray(view, np.float32), order)

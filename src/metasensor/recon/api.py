@@ -15,21 +15,23 @@ iterations) and at 2.6 GB in 1,982 s with the default HQS (``benchmarks/bench_st
 Each block gets its own PSF bank from its local aberration
 (``zernike`` everywhere plus ``field_zernike`` at the block), or a given bank (``psf=``);
 ``method="wave"``/``"geometric"`` first estimate the block's aberration with DAO
-(:func:`metasensor.recon.dao.estimate_block_aberration`), then run ISA with it.
+(:func:`metasensor.dao.estimate.estimate_block_aberration`), then run ISA with it.
 
 ISA solver (``solver=``): ``"hqs"``, phase-space deconvolution with a sparse-gradient prior
-(:mod:`metasensor.recon.hqs`; scan steps up to 5 px: a 1 x 1 scan would factor 225 x 225 systems
+(:mod:`metasensor.solvers.hqs`; scan steps up to 5 px: a 1 x 1 scan would factor 225 x 225 systems
 per frequency), or ``"rl"``, the authors' ordered-subset Richardson–Lucy
-(:mod:`metasensor.recon.isa`; ``iterations`` and ``subsets`` apply to it). The default (None)
+(:mod:`metasensor.solvers.richardson_lucy`; ``iterations`` and ``subsets`` apply to it). The
+default (None)
 is HQS, unless ``iterations`` or ``subsets`` is given (Richardson–Lucy's parameters) or the scan
 step exceeds 5 px. Measured on simulated 192-px captures, 5 x 5 scan, 30 dB: SSIM 0.907 (chart) /
 0.779 (camera) for HQS against 0.516 / 0.671 for RL (the best linear reconstruction on
 model-exact data: 0.56 / 0.66); a ~1.4 λ aberrated block 26.2 dB against 24.0 dB; multisite
 4 x 4 blocks 24.36 dB against 24.11 dB. HQS costs 21x RL's 5 iterations at 300 px, 10-11x
-at 600-1,000 px and 8.1x at 2,010 px (153 s on 2 cores, 6.8 GB; recon.hqs).
+at 600-1,000 px and 8.1x at 2,010 px (153 s on 2 cores, 6.8 GB; solvers.hqs).
 
 With ``register=True`` every block's views are first registered against its bank
-(:mod:`metasensor.recon.register`): sub-pixel view shifts, which a defocus or aberration error of
+(:mod:`metasensor.dao.bank_registration`): sub-pixel view shifts, which a defocus or aberration
+error of
 the bank causes, are measured, fitted by a wavefront error's gradients and folded into the PSFs
 where they lower the misfit. A 0.1 λ defocus error took HQS from SSIM 0.907 to 0.313 (chart,
 192 px, 30 dB); registered 0.874. Off by default: on the true banks of strongly aberrated
@@ -48,9 +50,14 @@ from typing import Any
 import numpy as np
 
 from metasensor.config import SystemConfig
+from metasensor.dao.bank_registration import WAVEFRONT_MODES
 from metasensor.recon.blocks import Block, Stitcher, block_zernikes, split_blocks
-from metasensor.recon.isa import DEFAULT_ITERATIONS, default_subsets, subset_major, view_order
-from metasensor.recon.register import WAVEFRONT_MODES
+from metasensor.solvers.richardson_lucy import (
+    DEFAULT_ITERATIONS,
+    default_subsets,
+    subset_major,
+    view_order,
+)
 
 __all__ = ["reconstruct", "Reconstruction", "BlockTask", "reconstruct_block"]
 
@@ -106,7 +113,7 @@ class Reconstruction:
     seconds: float
     solver: str = "hqs"  # the ISA solver used: "hqs" or "rl"
     dao_history: list = field(default_factory=list)  # [by][bx] -> DAO history (wave/geometric)
-    # [by][bx] -> r.m.s. view shift (px) measured in each registration round (recon.register)
+    # [by][bx] -> r.m.s. view shift (px) measured in each registration round (dao.bank_registration)
     registration: list = field(default_factory=list)
     # (by, bx, J) the wavefront (waves, Noll) the registered shifts amount to: minus the error of
     # each block's bank (Registration.zernike); None without registration
@@ -140,7 +147,7 @@ class BlockTask:
     windowed: bool = False  # ``views`` already holds just this block's window
     solver: str = "hqs"  # reconstruct() resolves it (module docstring)
     solver_kwargs: dict = field(default_factory=dict)
-    register: bool = False  # register the views against the bank first (recon.register)
+    register: bool = False  # register the views against the bank first (dao.bank_registration)
 
 
 @dataclass
@@ -175,8 +182,8 @@ def reconstruct_block(task: BlockTask) -> BlockResult:
     """ISA (after DAO for wave/geometric) of one block; returns the block's region image."""
     import torch
 
-    from metasensor.recon.forward import PhaseSpaceOperator, make_geometry
-    from metasensor.recon.isa import richardson_lucy
+    from metasensor.phasespace.operator import PhaseSpaceOperator, make_geometry
+    from metasensor.solvers.richardson_lucy import richardson_lucy
 
     cfg = task.cfg
     d = cfg.scan_step_px
@@ -190,7 +197,7 @@ def reconstruct_block(task: BlockTask) -> BlockResult:
     if task.method in ("wave", "geometric"):
         import importlib
 
-        dao = importlib.import_module("metasensor.recon.dao")  # lazily: the DAO stage's module
+        dao = importlib.import_module("metasensor.dao.estimate")  # lazily: the DAO stage's module
         init = zernike if np.any(zernike) else None
         geometric_bank = (task.method == "geometric" and bank is None and task.psf_fn is None
                           and hasattr(dao, "run_dao") and hasattr(dao, "block_psfs"))
@@ -208,9 +215,9 @@ def reconstruct_block(task: BlockTask) -> BlockResult:
         zernike[:z_est.size] = z_est
         dao_history = [float(h) for h in dao_history]
     if bank is None and task.psf_fn is None and task.method == "wave":
-        # the window of the views used, from the estimate's ray reach (recon.dao.psf_window;
+        # the window of the views used, from the estimate's ray reach (dao.estimate.psf_window;
         # 2-3x smaller than view_psfs' all-views default, >= 99.4 % of the used views' light)
-        from metasensor.recon.dao import psf_window
+        from metasensor.dao.estimate import psf_window
 
         bank = _default_psfs(cfg, zernike, task.device, size=psf_window(cfg, zernike))
     if bank is None:
@@ -227,7 +234,7 @@ def reconstruct_block(task: BlockTask) -> BlockResult:
     reg_zernike = None
     op = None
     if task.register:
-        from metasensor.recon.register import register_views
+        from metasensor.dao.bank_registration import register_views
 
         reg = register_views(psf, data_win, d, device=task.device, pad=task.pad, cfg=task.cfg,
                              uv=task.uv)
@@ -239,7 +246,7 @@ def reconstruct_block(task: BlockTask) -> BlockResult:
     geometry = op.geometry
     data, mask = geometry.embed(torch.from_numpy(data_win).to(op.device))
     if task.solver == "hqs":
-        from metasensor.recon.hqs import hyper_laplacian_isa
+        from metasensor.solvers.hqs import hyper_laplacian_isa
 
         result = hyper_laplacian_isa(op, psf, data, mask, progress=task.progress,
                                      **task.solver_kwargs)
@@ -284,12 +291,14 @@ def reconstruct(views, cfg: SystemConfig, method: str = "isa", zernike=None, fie
     psf : a given (nnum, nnum, K, K) bank for every block (skips PSF generation), or None.
     psf_fn : callable(cfg, zernike (J,), device) -> bank, replacing ``optics.psf.view_psfs``.
     subsets : view subsets per Richardson–Lucy iteration (1 = simultaneous, n_views = sequential;
-        default 16, or 1 for scan steps above 5 px: :func:`metasensor.recon.isa.default_subsets`).
+        default 16, or 1 for scan steps above 5 px:
+        :func:`metasensor.solvers.richardson_lucy.default_subsets`).
     solver : "hqs", "rl" or None (module docstring: HQS unless ``iterations``/``subsets`` is
         given or the scan step exceeds 5 px); solver_kwargs : passed to
-        :func:`metasensor.recon.hqs.hyper_laplacian_isa` (e.g. ``lam_scale``, ``noise``).
+        :func:`metasensor.solvers.hqs.hyper_laplacian_isa` (e.g. ``lam_scale``, ``noise``).
     register : register every view against the PSF bank before the solve
-        (:mod:`metasensor.recon.register`: sub-pixel view shifts folded into the bank, kept only
+        (:mod:`metasensor.dao.bank_registration`: sub-pixel view shifts folded into the bank, kept
+        only
         where they lower the misfit); for banks that may be off (a defocus or aberration error):
         HQS's detail depends on the exact PSFs. Default False.
     view_radius : pupil radius (views) of the views used (``cfg.view_mask``; default: the
@@ -380,7 +389,7 @@ def reconstruct(views, cfg: SystemConfig, method: str = "isa", zernike=None, fie
 
         steps = iterations
         if solver == "hqs":
-            from metasensor.recon.hqs import continuation_steps
+            from metasensor.solvers.hqs import continuation_steps
 
             steps = continuation_steps(**(solver_kwargs or {}))
         bar = tqdm(total=len(block_list) * steps, desc="reconstruct", unit="it")

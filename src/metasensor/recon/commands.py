@@ -244,7 +244,7 @@ def register(app: typer.Typer) -> None:
         if system is not None:
             if fz is not None:
                 raise ValueError("give either --system or --field-zernike, not both")
-            from metasensor.recon.system import SystemAberration
+            from metasensor.dao.system_aberration import SystemAberration
 
             if not system.is_file():
                 raise FileNotFoundError(f"system aberration file not found: {system}")

@@ -54,7 +54,7 @@ class DemoSettings:
     # 16.66 dB, 0.590, 0.151 (2D sensor 0.037): 6 sharpens the aberrated field edge most for
     # the least SSIM.
     iterations: int | None = 6
-    # ISA solver of the meta-imaging row: "hqs" (the sparse-gradient prior, recon.hqs) or "rl"
+    # ISA solver of the meta-imaging row: "hqs" (the sparse-gradient prior, solvers.hqs) or "rl"
     # (Richardson-Lucy with ``iterations``); the plain light field (1 x 1 scan) always uses RL.
     # Measured on this demo: HQS (after view registration) PSNR 16.83 dB, SSIM 0.830, MTF50
     # centre / edge 0.177 / 0.217 c/px, 92 s in all (unregistered: 16.68 dB, 0.816, 0.186 /

@@ -2,7 +2,7 @@
 
 The paper (Methods, "Initial global aberration estimation") binarises the views' angular
 intensity to find the pupil's shape, a ring for a Cassegrain telescope
-(:func:`metasensor.recon.pupil_estimate.estimate_pupil`). At the resolution of one view
+(:func:`metasensor.dao.pupil.estimate_pupil`). At the resolution of one view
 (``nnum²`` views over the pupil) a binary map gives the central obstruction only to about one
 view (≈ 0.13 of the radius for nnum = 15). :func:`estimate_annulus` fits the ratio instead: the
 angular intensity of view (u, v) is modelled as the area fraction of its cell (side
@@ -21,8 +21,8 @@ import numpy as np
 from scipy import ndimage
 
 from metasensor.config import SystemConfig
+from metasensor.dao.pupil import angular_intensity, estimate_pupil
 from metasensor.optics.pupil import disk_fraction
-from metasensor.recon.pupil_estimate import angular_intensity, estimate_pupil
 
 __all__ = ["AnnulusEstimate", "estimate_annulus", "annulus_model"]
 

@@ -1,7 +1,7 @@
 """One DAO block's data and its two steps: the deconvolved mean image and the view shifts.
 
 Hand-written (the paper's Methods, "ISA with multisite DAO in wave optics"; the loop that drives
-it is :func:`metasensor.recon.dao.run_dao`, whose docstring states the algorithm and the
+it is :func:`metasensor.dao.estimate.run_dao`, whose docstring states the algorithm and the
 known-region weights added here).
 """
 
@@ -10,10 +10,10 @@ from __future__ import annotations
 import numpy as np
 import torch
 
+from metasensor.align.shifts import fourier_shift, measure_shifts_torch, shift_precision
 from metasensor.backend import as_tensor
 from metasensor.config import SystemConfig
-from metasensor.recon.fastdeconv import beta_schedule, kf_deconv, pad_fade, psf2otf
-from metasensor.recon.shifts import fourier_shift, measure_shifts_torch, shift_precision
+from metasensor.solvers.krishnan_fergus import beta_schedule, kf_deconv, pad_fade, psf2otf
 
 __all__ = ["DaoBlock"]
 
@@ -143,9 +143,10 @@ class DaoBlock:
         return (acc / self.energy.sum()).clamp(min=0)
 
     def estimate_isa(self, iterations: int = 5, subsets: int = 16) -> torch.Tensor:
-        """I = the block's ISA (phase-space Richardson–Lucy, :func:`~metasensor.recon.isa.
-        richardson_lucy`, the authors' spiral view order) of all used views with the current
-        PSFs, on the pixel grid (H, W) at the scale of :meth:`estimate`.
+        """I = the block's ISA (phase-space Richardson–Lucy,
+        :func:`~metasensor.solvers.richardson_lucy.richardson_lucy`, the authors' spiral view
+        order) of all used views with the current PSFs, on the pixel grid (H, W) at the scale of
+        :meth:`estimate`.
 
         Not in the paper, whose intermediate image is :meth:`estimate` (the mean of the views'
         separate deconvolutions). The joint deconvolution resolves what no single view does, so
@@ -155,8 +156,8 @@ class DaoBlock:
         camera, draw 1) against 0.172 / 0.181 λ with :meth:`estimate` (0.035 / 0.051 λ with the
         sparse-gradient solver in place of RL: no better, 8x slower). Shifts are not applied:
         ``run_dao`` measures once per update with it."""
-        from metasensor.recon.forward import PhaseSpaceOperator, make_geometry
-        from metasensor.recon.isa import richardson_lucy, subset_major, view_order
+        from metasensor.phasespace.operator import PhaseSpaceOperator, make_geometry
+        from metasensor.solvers.richardson_lucy import richardson_lucy, subset_major, view_order
 
         raster = [(int(u), int(v)) for u, v in zip(*np.nonzero(self.used), strict=True)]
         pos = {p: i for i, p in enumerate(raster)}

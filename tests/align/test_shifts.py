@@ -1,4 +1,4 @@
-"""Sub-pixel shift measurement and Fourier translation (recon/shifts.py)."""
+"""Sub-pixel shift measurement and Fourier translation (align/shifts.py)."""
 
 import numpy as np
 import pytest
@@ -8,7 +8,7 @@ from scipy.ndimage import shift as nd_shift
 from skimage import data
 from skimage.registration import phase_cross_correlation
 
-from metasensor.recon.shifts import fourier_shift, measure_shifts
+from metasensor.align.shifts import fourier_shift, measure_shifts
 
 
 def _scene(sigma=2.0):
@@ -92,7 +92,7 @@ def test_weight_excludes_a_region_the_reference_does_not_know(rng):
     # (measured 0.1-1 sample); with weight 0 there it is the applied shift within 0.02 sample
     import torch
 
-    from metasensor.recon.shifts import measure_shifts_torch
+    from metasensor.align.shifts import measure_shifts_torch
 
     shifts = np.array([[1.4, -0.8], [-2.2, 1.7]])
     ref, mov = _shifted_crops(_scene(), shifts)
@@ -113,7 +113,7 @@ def test_shift_precision_predicts_the_scatter_of_measured_shifts(rng):
     # over 64 noise draws of a sharp and a blurred scene (two noise levels): the r.m.s. error per
     # component is within 25 % of 1/sqrt(precision) (measured ratios 0.89-0.96); the blurred scene
     # and the higher noise have the lower precision
-    from metasensor.recon.shifts import measure_shifts_torch, shift_precision
+    from metasensor.align.shifts import measure_shifts_torch, shift_precision
 
     out = {}
     for blur, noise in ((1.5, 0.02), (4.0, 0.02), (1.5, 0.06)):

@@ -1,7 +1,8 @@
 """The normal operator AᵀA of the phase-space model, block-diagonal in the Fourier domain.
 
 Hand-written (no library folds a multi-view sampled convolution). For the operator
-``A = [S_d(H_v ⊛ ·)]_v`` of :class:`metasensor.recon.forward.PhaseSpaceOperator` on a domain of
+``A = [S_d(H_v ⊛ ·)]_v`` of :class:`metasensor.phasespace.operator.PhaseSpaceOperator` on a
+domain of
 ``(My·d, Mx·d)`` pixels, sampling every d-th pixel aliases the d² frequencies
 ``(p + a·My, q + b·Mx)``, a, b = 0..d−1, onto the view frequency (p, q). Hence (unnormalised DFTs)
 
@@ -26,7 +27,7 @@ import math
 import numpy as np
 import torch
 
-from metasensor.recon.forward import PhaseSpaceOperator
+from metasensor.phasespace.operator import PhaseSpaceOperator
 
 __all__ = ["FoldedNormal", "tikhonov", "difference_weights"]
 

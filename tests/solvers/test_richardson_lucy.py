@@ -3,11 +3,11 @@
 import numpy as np
 import pytest
 import torch
-from recon_standin import gaussian_psfs, one_torch_thread, synth_views  # noqa: F401
 
 from metasensor.config import SystemConfig
-from metasensor.recon.forward import PhaseSpaceOperator, make_geometry
-from metasensor.recon.isa import make_subsets, richardson_lucy, view_order
+from metasensor.phasespace.operator import PhaseSpaceOperator, make_geometry
+from metasensor.solvers.richardson_lucy import make_subsets, richardson_lucy, view_order
+from recon_standin import gaussian_psfs, one_torch_thread, synth_views  # noqa: F401
 
 
 def _problem(rng, noise=0.0, n=5, d=1):
@@ -88,8 +88,8 @@ def test_coarse_scans_default_to_the_simultaneous_update():
     # beats 16 subsets: measured SSIM 0.460 vs 0.377, peak 0.88x vs 1.11x the truth's maximum.
     import metasensor as ms
     from metasensor.metrics import ssim as ssim_of
-    from metasensor.recon.isa import DEFAULT_SUBSETS, default_subsets
     from metasensor.simulation.scenes import load_scene
+    from metasensor.solvers.richardson_lucy import DEFAULT_SUBSETS, default_subsets
 
     assert default_subsets(3) == default_subsets(5) == DEFAULT_SUBSETS == 16
     assert default_subsets(15) == 1

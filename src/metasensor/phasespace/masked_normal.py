@@ -1,26 +1,27 @@
 """AᵀMA for a window observed in one rectangle of the sample grid, without the full operator.
 
 Hand-written (no library has the phase-space operator). A padded window
-(:func:`metasensor.recon.forward.make_geometry`) observes the samples of a rectangle
+(:func:`metasensor.phasespace.operator.make_geometry`) observes the samples of a rectangle
 ``[y0, y1) x [x0, x1)`` of the domain's sample grid; the rest (the margins) are unobserved, so the
 normal operator of the masked data term is not circular:
 
     AᵀMA v = AᵀA v − Aᵀ(1 − M)A v.
 
 The first term is circular and costs two full-size FFTs and a batched d² x d² product through
-:class:`metasensor.recon.normal.FoldedNormal`. The second involves only the unobserved samples,
+:class:`metasensor.phasespace.normal.FoldedNormal`. The second involves only the unobserved samples,
 which lie in two bands: the sample rows outside [y0, y1) (all columns; one band, since the domain
 is circular) and the sample columns outside [x0, x1) within rows [y0, y1). A sample depends on
 pixels within the PSF radius of it, so each band's part is exact on a *band domain*: the band's
 samples plus ``ceil(radius / d)`` samples of image either side across the band, circular along it.
-There a :class:`~metasensor.recon.forward.PhaseSpaceOperator` of the same bank applies A, the band
+There a :class:`~metasensor.phasespace.operator.PhaseSpaceOperator` of the same bank applies A,
+the band
 mask and Aᵀ, and the result is added back (index_add: the extraction's transpose).
 
 Cost: the band operators transform ``V`` views on the bands' area instead of the domain's. At a
 2,010² window (5 x 5 scan, 113 views, 45-px PSFs, 2,100² domain) the bands cover 10 % of the
 domain and one call takes 0.37 s (folded product 0.15 s, bands 0.22 s) against 3.1 s for
 ``op.adjoint(op.forward(v) * mask)`` on 2 cores, equal to 3.6e-7 (relative); this made
-:func:`metasensor.recon.hqs.hyper_laplacian_isa` 2.5x faster there (``benchmarks/bench_isa.py``
+:func:`metasensor.solvers.hqs.hyper_laplacian_isa` 2.5x faster there (``benchmarks/bench_isa.py``
 ``_hqs_row``; whole solve before / after: 300 px 7.0 / 6.4 s, 600 px 23.2 / 14.0 s, 1,005 px
 67.5 / 32.3 s, 2,010 px 383 / 153 s).
 Where the
@@ -34,8 +35,8 @@ import math
 
 import torch
 
-from metasensor.recon.forward import Geometry, PhaseSpaceOperator, smooth_size
-from metasensor.recon.normal import FoldedNormal
+from metasensor.phasespace.normal import FoldedNormal
+from metasensor.phasespace.operator import Geometry, PhaseSpaceOperator, smooth_size
 
 __all__ = ["BandNormal", "masked_normal", "MAX_BAND_FRACTION"]
 

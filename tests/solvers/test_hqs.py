@@ -1,4 +1,4 @@
-"""ISA with the sparse-gradient prior (recon.hqs) on data that follow the model (and, once, not).
+"""ISA with the sparse-gradient prior (solvers.hqs) on data that follow the model (and, once, not).
 
 Scenes: the built-in chart on a 120 x 120 px circular domain (5 x 5 scan, 113 views, library
 PSFs), white Gaussian noise at the simulator's SNR definition (mean square / noise power).
@@ -8,13 +8,13 @@ SSIM = skimage's, data range 1 (the chart spans 0.05-0.95).
 import numpy as np
 import pytest
 import torch
-from recon_standin import one_torch_thread  # noqa: F401
 
 import metasensor as ms
-from metasensor.recon.forward import PhaseSpaceOperator, make_geometry
-from metasensor.recon.hqs import estimate_noise, hyper_laplacian_isa
-from metasensor.recon.isa import richardson_lucy
+from metasensor.phasespace.operator import PhaseSpaceOperator, make_geometry
 from metasensor.simulation.scenes import resolution_chart
+from metasensor.solvers.hqs import estimate_noise, hyper_laplacian_isa
+from metasensor.solvers.richardson_lucy import richardson_lucy
+from recon_standin import one_torch_thread  # noqa: F401
 
 S = 40  # view samples per side
 

@@ -37,12 +37,12 @@ Alternate, starting from φ = ``init`` (or 0):
    weights and 0.16-0.19 λ with them (thresholds 0.97-0.9); wave DAO from φ = 0 ended at
    1.92 λ residual before and 0.61 λ after (``benchmarks/bench_ed_fig4.py`` has all draws).
 4. every ``inner`` (3) iterations, fit the shifts by Zernike modes 4–45 plus a common offset
-   (:mod:`metasensor.recon.wavefront`), add the fit to φ, regenerate the PSFs and restart the
+   (:mod:`metasensor.dao.wavefront`), add the fit to φ, regenerate the PSFs and restart the
    shifts from 0. Stop when the r.m.s. of the update is below ``tol`` (0.1 λ; 0 runs all) or
    after ``max_iter`` updates.
 
    Not in the paper (added here): the fit weights every view by the precision of its shift
-   (:func:`metasensor.recon.shifts.shift_precision`: the inverse variance of the shift under
+   (:func:`metasensor.align.shifts.shift_precision`: the inverse variance of the shift under
    white noise, from the prediction's gradients and the residual; the paper's fit weighs all
    views alike; ``weigh_views=False`` restores that). At 3 λ the views' precisions span more
    than two orders of magnitude (few known samples, blurred or dim views); the plain fit let
@@ -68,15 +68,15 @@ import torch
 
 from metasensor.backend import as_tensor, resolve_device, to_numpy
 from metasensor.config import SystemConfig
-from metasensor.recon.dao_block import DaoBlock
-from metasensor.recon.fastdeconv import DEFAULT_LAMBDA
-from metasensor.recon.wavefront import (
+from metasensor.dao.block import DaoBlock
+from metasensor.dao.wavefront import (
     DAO_MODES,
     fit_shifts,
     gradient_matrix,
     zernike_rms,
 )
-from metasensor.recon.wavefront import predicted_shifts as _predicted
+from metasensor.dao.wavefront import predicted_shifts as _predicted
+from metasensor.solvers.krishnan_fergus import DEFAULT_LAMBDA
 
 __all__ = ["estimate_block_aberration", "DaoResult", "run_dao", "geometric_psfs", "block_psfs",
            "ray_reach_px", "psf_window"]
@@ -107,8 +107,8 @@ def ray_reach_px(cfg: SystemConfig, zernike, mask=None, subsample: int = 5) -> f
     the pupil footprints of the views in ``mask`` (default ``cfg.view_mask()``; each footprint a
     square of side 1/pupil_radius_px around the view's pupil point, sampled by ``subsample²``
     points, clipped to the pupil). Tip and tilt included. 0 for None / a zero vector."""
+    from metasensor.dao.wavefront import shift_scale
     from metasensor.optics.zernike import zernike_gradients
-    from metasensor.recon.wavefront import shift_scale
 
     if zernike is None:
         return 0.0
@@ -135,7 +135,7 @@ def psf_window(cfg: SystemConfig, zernike=None, mask=None, margin: float | None 
     ``view_psfs``' default window (99.5 % of the light of *all* views, sized by the ray reach at
     the pupil rim, where high-order Zernike gradients peak), which the dark outer views need but
     the used ones do not; the light it drops is measured in ``tests/recon/test_dao.py``."""
-    from metasensor.recon.wavefront import shift_scale
+    from metasensor.dao.wavefront import shift_scale
 
     if margin is None:
         margin = cfg.nnum + 10.0 * shift_scale(cfg)
@@ -156,8 +156,8 @@ def _psf_bank(cfg: SystemConfig, zernike, amplitude, device, psf_kw) -> np.ndarr
 def geometric_psfs(ideal: np.ndarray, shifts: np.ndarray) -> np.ndarray:
     """Aberration-free PSFs ``(n, n, K, K)`` translated by ``shifts (n, n, 2)`` pixels (y, x)
     (Fourier shift, after padding K to hold the largest shift; every view keeps its energy;
-    :func:`metasensor.recon.register.translate_psfs`) → ``(n, n, K', K')``, K' odd."""
-    from metasensor.recon.register import translate_psfs
+    :func:`metasensor.dao.bank_registration.translate_psfs`) → ``(n, n, K', K')``, K' odd."""
+    from metasensor.dao.bank_registration import translate_psfs
 
     h = np.asarray(ideal, dtype=np.float32)
     s = np.asarray(shifts, dtype=np.float64)
@@ -202,7 +202,7 @@ def run_dao(block_views, cfg: SystemConfig, method: str = "wave", init=None, dev
     method : "wave" (PSFs regenerated from the estimated pupil) or "geometric" (ideal PSFs
         translated by the measured shifts).
     init : initial Noll vector (waves), e.g. the local system aberration; None = 0.
-    amplitude : (nnum, nnum) pupil amplitude (:mod:`metasensor.recon.pupil_estimate`) or None.
+    amplitude : (nnum, nnum) pupil amplitude (:mod:`metasensor.dao.pupil`) or None.
     psf_kw : extra keyword arguments for ``view_psfs`` (e.g. ``{"cache": False}``).
     psf_size : PSF window K: "auto" (default) :func:`psf_window` of the current estimate over
         the used views, recomputed at every update (geometric: of the ideal bank, then padded by

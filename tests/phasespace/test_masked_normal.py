@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 import torch
 
-from metasensor.recon.forward import PhaseSpaceOperator, make_geometry
-from metasensor.recon.masked_normal import BandNormal, masked_normal
-from metasensor.recon.normal import FoldedNormal
+from metasensor.phasespace.masked_normal import BandNormal, masked_normal
+from metasensor.phasespace.normal import FoldedNormal
+from metasensor.phasespace.operator import PhaseSpaceOperator, make_geometry
 
 
 def _problem(window=(20, 26), d=3, k=9, views=5, seed=0):

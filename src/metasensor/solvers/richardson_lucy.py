@@ -1,7 +1,7 @@
 """Incoherent synthetic aperture (ISA): phase-space Richardson–Lucy deconvolution of the views.
 
 Hand-written (the authors' algorithm, Lu et al. Opt. Express 2019, in our sampled forward model,
-:mod:`metasensor.recon.forward`). Ordered-subset Richardson–Lucy (OS-EM):
+:mod:`metasensor.phasespace.operator`). Ordered-subset Richardson–Lucy (OS-EM):
 
     I <- I · A_Sᵀ(y_S / A_S I) / A_Sᵀ(1)
 
@@ -28,7 +28,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import torch
 
-from metasensor.recon.forward import PhaseSpaceOperator
+from metasensor.phasespace.operator import PhaseSpaceOperator
 
 __all__ = ["view_order", "make_subsets", "subset_major", "richardson_lucy", "RLResult",
            "DEFAULT_ITERATIONS", "DEFAULT_SUBSETS", "default_subsets"]

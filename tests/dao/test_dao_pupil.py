@@ -1,10 +1,10 @@
-"""Pupil amplitude from the views' angular intensity (recon/pupil_estimate.py)."""
+"""Pupil amplitude from the views' angular intensity (dao/pupil.py)."""
 
 import numpy as np
 import pytest
 
 from metasensor.config import SystemConfig
-from metasensor.recon.pupil_estimate import (
+from metasensor.dao.pupil import (
     angular_intensity,
     estimate_block_pupils,
     estimate_pupil,

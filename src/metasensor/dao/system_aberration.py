@@ -1,13 +1,13 @@
 """Global system-aberration calibration (paper, Methods: "Initial global aberration estimation").
 
 Register every view to the centre view with a smooth non-rigid shift field (control-point grid,
-default 15 × 20 = the paper's 20 × 15, Adam, L2; :mod:`metasensor.recon.registration`) on a
+default 15 × 20 = the paper's 20 × 15, Adam, L2; :mod:`metasensor.align.nonrigid`) on a
 textured capture (e.g. a checkerboard). The shift of view (u, v) at field point p is the local
 wavefront gradient of that sub-aperture relative to the centre view (docs/conventions.md):
-fitting Zernike modes 4–45 to the shifts of all views (:func:`metasensor.recon.wavefront.
+fitting Zernike modes 4–45 to the shifts of all views (:func:`metasensor.dao.wavefront.
 fit_shifts`) at the centre of every block gives the field-dependent wavefront map
 ``(by, bx, 45)``. The pupil amplitude per block comes from the angular intensity
-(:mod:`metasensor.recon.pupil_estimate`). Saved as HDF5 (``system.h5``), used to initialise the
+(:mod:`metasensor.dao.pupil`). Saved as HDF5 (``system.h5``), used to initialise the
 per-block DAO (``init``) or alone (``reconstruct(field_zernike=sa.zernike)``), and by the depth
 stage to warp views (:meth:`SystemAberration.shift_maps`).
 
@@ -155,9 +155,9 @@ def calibrate_system(views, cfg: SystemConfig, blocks: tuple[int, int] = (4, 4),
     blocks : (by, bx) blocks whose centres get a Noll vector; grid : control points (rows, cols)
     of the per-view registration; iterations : Adam steps per pyramid level.
     """
-    from metasensor.recon.pupil_estimate import estimate_block_pupils
-    from metasensor.recon.registration import register_nonrigid_batch
-    from metasensor.recon.wavefront import fit_shifts, gradient_matrix
+    from metasensor.align.nonrigid import register_nonrigid_batch
+    from metasensor.dao.pupil import estimate_block_pupils
+    from metasensor.dao.wavefront import fit_shifts, gradient_matrix
 
     n = cfg.nnum
     v = np.asarray(views, dtype=np.float32)

@@ -143,7 +143,7 @@ def _warp(reference: torch.Tensor, shifts: torch.Tensor) -> tuple[torch.Tensor, 
     """``reference(p − s)`` (B, H, W) by a Fourier shift of the reference padded with a
     reflection fading to its mean (band-limited interpolation, no ringing from the borders),
     and the mask of the points whose source lies at least one sample inside the reference."""
-    from metasensor.recon.fastdeconv import pad_fade
+    from metasensor.solvers.krishnan_fergus import pad_fade
 
     b, (h, w) = shifts.shape[0], reference.shape[-2:]
     dev = reference.device

@@ -1,16 +1,17 @@
-"""View registration before ISA (recon.register): PSF translation, shift recovery, and its effect
+"""View registration before ISA (dao.bank_registration): PSF translation, shift recovery, and its
+effect
 on the sparse-gradient solver under a PSF-bank error."""
 
 import numpy as np
 import pytest
 import torch
-from recon_standin import one_torch_thread  # noqa: F401
 
 import metasensor as ms
+from metasensor.dao.bank_registration import register_views, translate_psfs
 from metasensor.metrics import ssim
-from metasensor.recon.forward import PhaseSpaceOperator, make_geometry
-from metasensor.recon.register import register_views, translate_psfs
+from metasensor.phasespace.operator import PhaseSpaceOperator, make_geometry
 from metasensor.simulation.scenes import load_scene, resolution_chart
+from recon_standin import one_torch_thread  # noqa: F401
 
 
 def _gauss(k=15, sigma=2.0):
@@ -104,7 +105,7 @@ def test_registration_rescues_hqs_from_a_defocus_error(capture):
 def test_registration_rejects_shifts_that_do_not_lower_the_misfit(bank, monkeypatch):
     # the views follow the bank exactly; a (forced) wrong shift measurement of 2 px per view
     # raises the misfit, so the candidate is rejected and the bank kept
-    import metasensor.recon.register as reg_mod
+    import metasensor.dao.bank_registration as reg_mod
 
     s = 30
     g = make_geometry((s, s), 3, bank.shape[-1] // 2, pad=True)
@@ -139,7 +140,7 @@ def test_wavefront_registration_applies_a_gradient_field_and_names_the_bank_erro
     # the fit explains them (> 0.95), applies its gradient field, and reports the error as Z4.
     # Expected Z4: the view at pupil edge (7, 13) moves by 0.18 * 6 = 1.08 px, and one wave of
     # Z4 moves it by -12.65 px (wavefront.predicted_shifts): about -0.085 λ.
-    from metasensor.recon.wavefront import predicted_shifts
+    from metasensor.dao.wavefront import predicted_shifts
 
     cfg = ms.SystemConfig()
     u, v = np.nonzero(cfg.view_mask())
@@ -161,7 +162,7 @@ def test_wavefront_registration_applies_a_gradient_field_and_names_the_bank_erro
 def test_wavefront_registration_stops_at_shifts_no_wavefront_explains(bank, monkeypatch):
     # a (forced) measurement of random shifts, 0.7 px r.m.s. per view: no wavefront error makes
     # them (the fit explains ~0.15 of them), so the round ends the registration before any fit
-    import metasensor.recon.register as reg_mod
+    import metasensor.dao.bank_registration as reg_mod
 
     cfg = ms.SystemConfig()
     u, v = np.nonzero(cfg.view_mask())
@@ -177,7 +178,7 @@ def test_wavefront_registration_stops_at_shifts_no_wavefront_explains(bank, monk
 
 def test_few_views_register_without_the_wavefront_fit(bank):
     # 9 views cannot fit 18 modes: the shifts are used as measured (no error)
-    from metasensor.recon.register import MIN_FIT_VIEWS
+    from metasensor.dao.bank_registration import MIN_FIT_VIEWS
 
     cfg = ms.SystemConfig()
     u, v = np.nonzero(cfg.view_mask())

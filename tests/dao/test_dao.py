@@ -1,4 +1,4 @@
-"""Per-block DAO (recon/dao.py): geometric PSFs, the loop on simulated blocks."""
+"""Per-block DAO (dao/estimate.py): geometric PSFs, the loop on simulated blocks."""
 
 import numpy as np
 import pytest
@@ -6,16 +6,16 @@ import torch
 
 import metasensor as ms
 from metasensor.config import SystemConfig
-from metasensor.optics.zernike import random_zernike
-from metasensor.recon.dao import (
+from metasensor.dao.block import DaoBlock
+from metasensor.dao.estimate import (
     DaoResult,
     block_psfs,
     estimate_block_aberration,
     geometric_psfs,
     run_dao,
 )
-from metasensor.recon.dao_block import DaoBlock
-from metasensor.recon.wavefront import zernike_rms
+from metasensor.dao.wavefront import zernike_rms
+from metasensor.optics.zernike import random_zernike
 
 CFG = SystemConfig()
 
@@ -140,7 +140,7 @@ def test_wave_dao_three_waves():
     # Measured before the shift measurement's known-region weights: 1.407, 0.818, 0.281, 0.184 λ
     # after updates 1-4 (240-px block, rays reach ~106 px); passes with them and with the
     # precision-weighted fit too
-    from metasensor.recon.dao import psf_window
+    from metasensor.dao.estimate import psf_window
 
     z = random_zernike(3.0, seed=3)
     k = psf_window(CFG, z) + 80
@@ -188,8 +188,8 @@ def test_ray_reach_tilt_and_defocus_analytic():
     # defocus Noll 4 (√3(2r²−1)) has |∇W| = 4√3·c·r, largest at the used footprints' outer edge:
     # r between the outermost used view centre (6 views / pupil_radius_px) and its footprint
     # corner (+0.5·√2 view), never beyond the pupil (r ≤ 1)
-    from metasensor.recon.dao import psf_window, ray_reach_px
-    from metasensor.recon.wavefront import shift_scale
+    from metasensor.dao.estimate import psf_window, ray_reach_px
+    from metasensor.dao.wavefront import shift_scale
 
     k = shift_scale(CFG)
     assert ray_reach_px(CFG, [0.0, 0.7]) == pytest.approx(1.4 * k, rel=1e-9)
@@ -215,7 +215,7 @@ def test_psf_window_keeps_the_used_views_light():
     # of the used views' light of view_psfs' default 99.5 %-of-all-views window at 1 λ
     # (measured 99.48 % and 99.69 % for K = 151 and 177 against 413 and 341), and is at most
     # 0.55× as wide (measured 0.37 and 0.52)
-    from metasensor.recon.dao import psf_window
+    from metasensor.dao.estimate import psf_window
 
     used = CFG.view_mask()
     for seed in (0, 1):

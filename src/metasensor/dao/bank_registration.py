@@ -5,10 +5,10 @@ Hand-written (no library registers views through a phase-space forward model). P
 1. I = phase-space Richardson–Lucy of all views with the current bank (5 iterations, 16 subsets:
    it blurs rather than invents, so its predictions carry little of the model error);
 2. s_uv = shift of the measured view V_uv against its prediction S_d(I ⊛ H_uv)
-   (:func:`metasensor.recon.shifts.measure_shifts_torch`, observed samples only), in pixels,
+   (:func:`metasensor.align.shifts.measure_shifts_torch`, observed samples only), in pixels,
    less their light-weighted mean (a shift common to all views is the image's position);
 3. with the system known (``cfg``, ``uv``; what ``reconstruct`` passes): s_uv is replaced by its
-   fit with the gradients of a wavefront error (Noll 4-21, :mod:`metasensor.recon.wavefront`,
+   fit with the gradients of a wavefront error (Noll 4-21, :mod:`metasensor.dao.wavefront`,
    the DAO wavefront sensor's model), since a bank that is off is a wavefront that is off; a round
    whose fit explains less than MIN_EXPLAINED of the shifts' variance is not a wavefront error
    and ends the registration (with fewer than MIN_FIT_VIEWS views the shifts go unfitted);
@@ -20,7 +20,7 @@ a wavefront error, a candidate is rejected, or after ``rounds`` rounds. ``Regist
 is the wavefront the applied shifts amount to (the bank's error with the opposite sign: a bank
 with 0.05 / 0.1 / 0.2 λ too much defocus reads Z4 = −0.055 / −0.101 / −0.198 λ).
 
-Why: the sparse-gradient solver (:mod:`metasensor.recon.hqs`) resolves detail the views determine
+Why: the sparse-gradient solver (:mod:`metasensor.solvers.hqs`) resolves detail the views determine
 only through the exact PSFs, so it is fragile where the bank is slightly wrong. Such errors shift
 views: a 0.05 λ r.m.s. defocus error already moves the outer views by ~0.8 px (measured below:
 0.43 px r.m.s. over the 113 views), which is what an object 0.05 λ off the assumed focus, or an
@@ -60,9 +60,9 @@ from dataclasses import dataclass, field
 import numpy as np
 import torch
 
-from metasensor.recon.forward import PhaseSpaceOperator, make_geometry
-from metasensor.recon.isa import richardson_lucy
-from metasensor.recon.shifts import fourier_shift, measure_shifts_torch
+from metasensor.align.shifts import fourier_shift, measure_shifts_torch
+from metasensor.phasespace.operator import PhaseSpaceOperator, make_geometry
+from metasensor.solvers.richardson_lucy import richardson_lucy
 
 __all__ = ["translate_psfs", "register_views", "Registration", "DEFAULT_ROUNDS",
            "WAVEFRONT_MODES", "MIN_EXPLAINED", "MIN_FIT_VIEWS"]
@@ -70,7 +70,7 @@ __all__ = ["translate_psfs", "register_views", "Registration", "DEFAULT_ROUNDS",
 DEFAULT_ROUNDS = 3  # measured: 0.43 -> 0.069 -> 0.019 px (0.05 λ error); 1.75 -> 0.036 -> 0.017
 DEFAULT_TOL_PX = 0.02  # a round below this r.m.s. shift ends the registration
 # With the system (cfg, uv) the measured shifts are fitted by the gradients of a wavefront error
-# (Noll modes 4-21, :mod:`metasensor.recon.wavefront`) and the fit is applied: a bank error is a
+# (Noll modes 4-21, :mod:`metasensor.dao.wavefront`) and the fit is applied: a bank error is a
 # wavefront error, so its shifts are a gradient field. Fraction of the shifts' variance the fit
 # explains, measured on the first round: defocus errors of 0.05 / 0.1 / 0.2 λ (192 px, chart and
 # camera, 30 dB) 0.99-1.00, recovering 0.048 / 0.095 / 0.195 λ; the noise of a right bank
@@ -123,7 +123,7 @@ def translate_psfs(psf: torch.Tensor, shifts: torch.Tensor) -> torch.Tensor:
 def _wavefront_fit(step: torch.Tensor, cfg, uv, matrix) -> tuple[torch.Tensor, np.ndarray, float]:
     """The shifts ``step (V, 2)`` of views ``uv`` fitted by wavefront-error gradients: (fitted
     shifts (V, 2), Noll vector (waves), fraction of the shifts' variance explained)."""
-    from metasensor.recon.wavefront import fit_shifts, predicted_shifts
+    from metasensor.dao.wavefront import fit_shifts, predicted_shifts
 
     n = cfg.nnum
     grid = np.full((n, n, 2), np.nan)
@@ -161,7 +161,7 @@ def register_views(psf, data_win, d: int, device=None, rounds: int = DEFAULT_ROU
     if (cfg is None) != (uv is None):
         raise ValueError("register_views needs both cfg and uv (or neither)")
     if cfg is not None:
-        from metasensor.recon.wavefront import gradient_matrix
+        from metasensor.dao.wavefront import gradient_matrix
 
         if len(uv) != psf0.shape[0]:
             raise ValueError(f"uv lists {len(uv)} views, the bank holds {psf0.shape[0]}")

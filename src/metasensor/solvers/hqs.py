@@ -1,9 +1,9 @@
 """ISA with a hyper-Laplacian image prior: half-quadratic splitting on the phase-space operator.
 
 Hand-written (no library solves a multi-view, sampled deconvolution with a sparse-gradient
-prior). It extends Krishnan & Fergus (NeurIPS 2009; :mod:`metasensor.recon.fastdeconv`, the
+prior). It extends Krishnan & Fergus (NeurIPS 2009; :mod:`metasensor.solvers.krishnan_fergus`, the
 per-view deconvolution of DAO) from one convolution to the whole scanning light-field
-measurement ``A`` of :class:`metasensor.recon.forward.PhaseSpaceOperator`:
+measurement ``A`` of :class:`metasensor.phasespace.operator.PhaseSpaceOperator`:
 
     min_x  (lam/2)·||A x − y||²  +  Σ |∇x|^alpha
 
@@ -26,7 +26,8 @@ prior fills those directions with edges instead of noise. Measured on simulated 
 (RL 0.519 / 0.689). Cost at 2,010 x 2,010 px, 2 cores: 153 s, 8.1x Richardson–Lucy's 5
 iterations (6.8 GB peak memory): 120 folded solves, 118 masked normal products, 9 forward calls.
 The masked normal products go through the folded normal operator and two margin bands
-(:mod:`metasensor.recon.masked_normal`, exact): before, each was a full forward and adjoint, and
+(:mod:`metasensor.phasespace.masked_normal`, exact): before, each was a full forward and
+adjoint, and
 the run took 383 s (21x RL; 444 s before the solves used the precomputed inverse). What remains is
 no longer FFTs (28.6 s of them, ratio 5.4): the d² x d² products, the fold copies and the
 factorisations (2.5 s per beta). The gain grows with the window: 300 px 7.0 -> 6.4 s (21x RL),
@@ -40,7 +41,7 @@ plug-and-play prior in place of the gradient shrinkage reached 0.72-0.75 on the 
 
 Aberrated and mismatched banks (the prior is not convex, so the start matters; see INIT_REG and
 MISFIT_REG; a bank whose views are shifted against the data, as a defocus error makes them, is
-fixed before this solver by :mod:`metasensor.recon.register`,
+fixed before this solver by :mod:`metasensor.dao.bank_registration`,
 ``reconstruct(register=True)``): a ~1.4 λ r.m.s. block (defocus, astigmatism, coma; camera,
 30 dB) reaches PSNR 26.2 dB (Richardson–Lucy 24.0 dB); a window whose margins hold a
 neighbouring block's aberration 24.8 dB (RL 22.6 dB); multisite 4 x 4 blocks with up to 1.8 λ
@@ -64,11 +65,11 @@ import math
 
 import torch
 
-from metasensor.recon.fastdeconv import beta_schedule, solve_w_table
-from metasensor.recon.forward import PhaseSpaceOperator
-from metasensor.recon.isa import RLResult
-from metasensor.recon.masked_normal import masked_normal
-from metasensor.recon.normal import FoldedNormal, difference_weights
+from metasensor.phasespace.masked_normal import masked_normal
+from metasensor.phasespace.normal import FoldedNormal, difference_weights
+from metasensor.phasespace.operator import PhaseSpaceOperator
+from metasensor.solvers.krishnan_fergus import beta_schedule, solve_w_table
+from metasensor.solvers.richardson_lucy import RLResult
 
 __all__ = ["estimate_noise", "hyper_laplacian_isa", "continuation_steps", "DEFAULT_LAM_SCALE"]
 

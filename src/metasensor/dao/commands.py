@@ -1,5 +1,5 @@
 """Command line of the DAO stage: ``metasensor calibrate-aberration`` (register with
-``metasensor.recon.dao_commands.register(app)``)."""
+``metasensor.dao.commands.register(app)``)."""
 
 from __future__ import annotations
 
@@ -47,8 +47,8 @@ def register(app: typer.Typer) -> None:
         Example: metasensor calibrate-aberration checker_views.tif --out system.h5 --blocks 4x4
         """
         from metasensor.config import SystemConfig
+        from metasensor.dao.system_aberration import calibrate_system, plot_wavefront_map
         from metasensor.io.views import check_against_stored, read_config_from_views, read_views
-        from metasensor.recon.system import calibrate_system, plot_wavefront_map
 
         if not capture.exists():
             raise FileNotFoundError(f"capture not found: {capture}")

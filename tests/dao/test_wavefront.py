@@ -1,17 +1,17 @@
-"""View shifts → Zernike (recon/wavefront.py): analytic Shack–Hartmann geometry."""
+"""View shifts → Zernike (dao/wavefront.py): analytic Shack–Hartmann geometry."""
 
 import numpy as np
 import pytest
 
 from metasensor.config import SystemConfig
-from metasensor.optics.zernike import random_zernike
-from metasensor.recon.wavefront import (
+from metasensor.dao.wavefront import (
     fit_shifts,
     gradient_matrix,
     predicted_shifts,
     shift_scale,
     zernike_rms,
 )
+from metasensor.optics.zernike import random_zernike
 
 CFG = SystemConfig()
 

@@ -77,7 +77,7 @@ def synth_views(scene: np.ndarray, bank: np.ndarray, d: int, border: int = 10) -
     """
     import torch
 
-    from metasensor.recon.forward import PhaseSpaceOperator, make_geometry
+    from metasensor.phasespace.operator import PhaseSpaceOperator, make_geometry
 
     n = bank.shape[0]
     total = scene.shape[0] // d

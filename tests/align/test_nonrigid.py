@@ -1,4 +1,4 @@
-"""Non-rigid registration (recon.registration): recover known displacement fields.
+"""Non-rigid registration (align.nonrigid): recover known displacement fields.
 
 Reference: the true shift field used to synthesise the reference image by 5th-order spline
 interpolation of the moving image (a different interpolator from the cubic B-spline warp inside
@@ -10,7 +10,7 @@ import pytest
 import torch
 from scipy import ndimage
 
-from metasensor.recon.registration import (
+from metasensor.align.nonrigid import (
     dense_field,
     register_nonrigid,
     register_nonrigid_batch,

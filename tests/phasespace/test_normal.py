@@ -6,8 +6,8 @@ import pytest
 import torch
 
 import metasensor as ms
-from metasensor.recon.forward import PhaseSpaceOperator, make_geometry
-from metasensor.recon.normal import FoldedNormal, difference_weights, tikhonov
+from metasensor.phasespace.normal import FoldedNormal, difference_weights, tikhonov
+from metasensor.phasespace.operator import PhaseSpaceOperator, make_geometry
 
 
 def _normal(scan: int, side: int, pad: bool = False, zernike=None):

@@ -4,9 +4,9 @@ import numpy as np
 import pytest
 import scipy.signal
 import torch
-from recon_standin import one_torch_thread  # noqa: F401
 
-from metasensor.recon.forward import PhaseSpaceOperator, make_geometry, smooth_size
+from metasensor.phasespace.operator import PhaseSpaceOperator, make_geometry, smooth_size
+from recon_standin import one_torch_thread  # noqa: F401
 
 
 def _bank(rng, v=5, k=9):

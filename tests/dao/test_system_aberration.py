@@ -1,13 +1,13 @@
-"""Global system-aberration calibration (recon/system.py)."""
+"""Global system-aberration calibration (dao/system_aberration.py)."""
 
 import numpy as np
 import pytest
 
 from metasensor.config import SystemConfig
+from metasensor.dao.system_aberration import SystemAberration, calibrate_system, plot_wavefront_map
+from metasensor.dao.wavefront import gradient_matrix, zernike_rms
 from metasensor.optics.field import evaluate_field_zernike, normalised_field
 from metasensor.optics.zernike import random_zernike
-from metasensor.recon.system import SystemAberration, calibrate_system, plot_wavefront_map
-from metasensor.recon.wavefront import gradient_matrix, zernike_rms
 
 CFG = SystemConfig()
 
@@ -84,8 +84,8 @@ def test_cli_calibrate_aberration(calibrated, tmp_path):
     import typer
     from typer.testing import CliRunner
 
+    from metasensor.dao.commands import register
     from metasensor.io.views import write_views
-    from metasensor.recon.dao_commands import register
 
     app = typer.Typer()
     register(app)
