@@ -34,7 +34,10 @@ def test_manifest_declares_the_reader_and_entry_point():
     assert manifest.name == "metasensor" and manifest.contributions.readers
 
 
-def test_views_tiff_is_one_4d_layer(make_napari_viewer, capture):
+def test_view_stacks_are_one_4d_layer(make_napari_viewer, capture, tmp_path):
+    """TIFF, Zarr, OME-Zarr and OME-TIFF view stacks: one (u, v, y, x) layer each."""
+    import zarr
+
     viewer = make_napari_viewer()
     (layer,) = _open(viewer, capture / "views.tif")
     views = read_views(capture / "views.tif")
@@ -47,10 +50,6 @@ def test_views_tiff_is_one_4d_layer(make_napari_viewer, capture):
     np.testing.assert_allclose(layer.translate, (0, 0, 2 * P_UM, 2 * P_UM))
     assert viewer.dims.ndim == 4  # the (u, v) sliders
     assert viewer.dims.axis_labels[:2] == ("u", "v")
-
-
-def test_zarr_and_ome_views(make_napari_viewer, capture, tmp_path):
-    import zarr
 
     views = read_views(capture / "views.tif").astype(np.float32)
     write_views(tmp_path / "views.zarr", views, CFG, extra={"origin": [1.0, 2.0]})
@@ -65,7 +64,6 @@ def test_zarr_and_ome_views(make_napari_viewer, capture, tmp_path):
     # an OME-TIFF of nnum² planes with its physical size
     tifffile.imwrite(tmp_path / "views.ome.tif", views.reshape(25, 35, 35), ome=True,
                      metadata={"axes": "ZYX", "PhysicalSizeX": 3.0, "PhysicalSizeY": 3.0})
-    viewer = make_napari_viewer()
     (z,) = _open(viewer, tmp_path / "views.zarr")
     assert z.data.shape == (5, 5, 35, 35) and tuple(z.axis_labels) == ("u", "v", "y", "x")
     np.testing.assert_allclose(z.translate[2:], ((1 + 2) * P_UM, (2 + 2) * P_UM))  # origin
@@ -79,7 +77,11 @@ def test_zarr_and_ome_views(make_napari_viewer, capture, tmp_path):
     np.testing.assert_array_equal(np.asarray(t.data), views)
 
 
-def test_raw_frames_and_capture_folder(make_napari_viewer, capture):
+def test_frames_calibration_and_result_folders(make_napari_viewer, capture, tmp_path):
+    """Raw frames, a capture folder, a calibration's grid, and reconstruct/depth outputs."""
+    from metasensor.io.views import description
+    from metasensor.sensor.calibration import Calibration
+
     viewer = make_napari_viewer()
     (frames,) = _open(viewer, capture / "frames.tif")
     assert frames.data.shape == (25, 40, 40) and tuple(frames.axis_labels) == ("t", "y", "x")
@@ -91,15 +93,10 @@ def test_raw_frames_and_capture_folder(make_napari_viewer, capture):
     assert truth.data.shape == (35, 35)
     np.testing.assert_allclose(truth.translate, (2 * P_UM, 2 * P_UM))  # o = 2 px
 
-
-def test_calibration_is_a_grid_overlay(make_napari_viewer, capture, tmp_path):
-    from metasensor.sensor.calibration import Calibration
-
     calib = Calibration(nnum=5, pitch=5.0, rotation=0.0, center=(2.0, 2.0), lenslets=(7, 7),
                         sensor_shape=(40, 40))
     calib.to_toml(tmp_path / "calib.toml")
     CFG.to_toml(tmp_path / "config.toml")
-    viewer = make_napari_viewer()
     (grid,) = _open(viewer, tmp_path / "calib.toml")
     assert grid._type_string == "shapes" and len(grid.data) == 8 + 8
     assert set(grid.shape_type) == {"line"}
@@ -107,12 +104,8 @@ def test_calibration_is_a_grid_overlay(make_napari_viewer, capture, tmp_path):
     # the first row border runs along sensor row -0.5 from column -0.5 to 34.5
     np.testing.assert_allclose(grid.data[0], [[-0.5, -0.5], [-0.5, 34.5]])
 
-
-def test_result_folder_layers(make_napari_viewer, capture, tmp_path):
-    """A reconstruct folder (image.tif + zernike.npy) and a depth folder open as the image, the
-    wavefront-map grid and the depth maps on the right grids."""
-    from metasensor.io.views import description
-
+    # a reconstruct folder (image.tif + zernike.npy) with a depth map: the image, the grid of
+    # wavefront maps and the disparity, each on its grid
     res = tmp_path / "result"
     res.mkdir()
     image = np.random.default_rng(0).random((35, 35)).astype(np.float32)
@@ -124,7 +117,6 @@ def test_result_folder_layers(make_napari_viewer, capture, tmp_path):
     disp = np.ones((35, 35), np.float32)
     tifffile.imwrite(res / "disparity.tif", disp, metadata=None,
                      description=json.dumps({"metasensor": {"kind": "disparity"}}))
-    viewer = make_napari_viewer()
     layers = _open(viewer, res)
     by_kind = {la.metadata["metasensor"]["kind"]: la for la in layers}
     assert set(by_kind) == {"image", "disparity", "wavefront"}

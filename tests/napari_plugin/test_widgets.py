@@ -6,7 +6,6 @@ cancelled run leaves nothing behind."""
 import json
 
 import numpy as np
-import pytest
 import tifffile
 from plugin_helpers import CFG, P_UM
 from typer.testing import CliRunner
@@ -35,12 +34,12 @@ def _replay(result, out):
     return target
 
 
-def test_every_field_has_the_cli_help_as_tooltip(make_napari_viewer):
+def test_every_field_has_the_cli_help_as_tooltip(qtbot):
     from metasensor.napari.widgets import cli_params
 
-    viewer = make_napari_viewer()
-    for factory in (panels.calibrate_widget, panels.realign_widget, panels.reconstruct_widget,
-                    panels.motion_widget, panels.depth_widget, panels.evaluate_widget):
+    viewer = None  # the forms need no viewer until they show a result
+    for factory in (panels.CalibrateWidget, panels.RealignWidget, panels.ReconstructWidget,
+                    panels.MotionWidget, panels.DepthWidget, panels.EvaluateWidget):
         w = factory(viewer)
         helps = {p.name: p.help for p in cli_params(w.command)}
         assert w.fields, w.command
@@ -51,7 +50,7 @@ def test_every_field_has_the_cli_help_as_tooltip(make_napari_viewer):
 def test_realign_and_reconstruct_widgets_match_the_cli(make_napari_viewer, qtbot, capture,
                                                        tmp_path):
     viewer = make_napari_viewer()
-    realign = panels.realign_widget(viewer)
+    realign = panels.RealignWidget(viewer)
     res = _run(qtbot, realign, raw_path=capture / "frames.tif", out=tmp_path / "realigned")
     assert res.status == "done", res.error
     views = read_views(tmp_path / "realigned" / "views.tif")
@@ -62,7 +61,7 @@ def test_realign_and_reconstruct_widgets_match_the_cli(make_napari_viewer, qtbot
     cli_views = _replay(res, tmp_path / "cli_realign")
     np.testing.assert_array_equal(read_views(cli_views), views)
 
-    rec = panels.reconstruct_widget(viewer)
+    rec = panels.ReconstructWidget(viewer)
     assert str(rec.fields["views"].value) == str(tmp_path / "realigned" / "views.tif")  # prefill
     res = _run(qtbot, rec, out=tmp_path / "result", blocks="2x2", overlap=6, solver="rl",
                iterations="2", zernike="4:0.3")
@@ -84,9 +83,16 @@ def test_realign_and_reconstruct_widgets_match_the_cli(make_napari_viewer, qtbot
                                   np.load(tmp_path / "result" / "zernike.npy"))
 
 
-def test_cancelled_reconstruction_leaves_nothing(make_napari_viewer, qtbot, capture, tmp_path):
+def test_cancel_and_errors_leave_nothing(make_napari_viewer, qtbot, capture, tmp_path,
+                                        monkeypatch):
+    """A reconstruction cancelled mid-solve, and a command that fails: no output folder, no
+    staging folder; the failure is one notification line (the CLI's error line)."""
+    import napari.utils.notifications as notes
+
+    shown = []
+    monkeypatch.setattr(notes, "show_error", shown.append)
     viewer = make_napari_viewer()
-    rec = panels.reconstruct_widget(viewer)
+    rec = panels.ReconstructWidget(viewer)
     rec.set(views=capture / "views.tif", out=tmp_path / "result", blocks="2x2", overlap=6)
     progress = []
     rec.start()
@@ -97,29 +103,20 @@ def test_cancelled_reconstruction_leaves_nothing(make_napari_viewer, qtbot, capt
     assert rec.outcome.status == "cancelled"
     assert rec.job._proc.poll() is not None  # the command was ended
     assert list(tmp_path.iterdir()) == []  # neither the folder nor the staging folder remains
-    assert "image" not in [la.name for la in viewer.layers]
+    assert "image" not in [la.name for la in viewer.layers] and shown == []
 
-
-def test_errors_are_one_line_notifications(make_napari_viewer, qtbot, capture, tmp_path,
-                                           monkeypatch):
-    import napari.utils.notifications as notes
-
-    shown = []
-    monkeypatch.setattr(notes, "show_error", shown.append)
-    viewer = make_napari_viewer()
-    rec = panels.reconstruct_widget(viewer)
-    res = _run(qtbot, rec, views=capture / "views.tif", out=tmp_path / "r", blocks="0x2")
+    res = _run(qtbot, rec, blocks="0x2")
     assert res.status == "failed" and "\n" not in res.error
     assert shown == [f"reconstruct: {res.error}"] and "blocks" in res.error
     assert list(tmp_path.iterdir()) == []
-    blank = panels.reconstruct_widget(viewer)
+    blank = panels.ReconstructWidget(viewer)
     blank.start()  # an incomplete form: named, nothing started
     assert blank.worker is None and shown[-1] == "choose the input (views)"
 
 
 def test_calibrate_depth_motion_evaluate_widgets(make_napari_viewer, qtbot, capture, tmp_path):
     viewer = make_napari_viewer()
-    cal = panels.calibrate_widget(viewer)
+    cal = panels.CalibrateWidget(viewer)
     res = _run(qtbot, cal, white=capture / "frames.tif", out=tmp_path / "calib",
                config=capture / "config.toml")
     assert res.status == "done", res.error
@@ -131,7 +128,7 @@ def test_calibrate_depth_motion_evaluate_widgets(make_napari_viewer, qtbot, capt
     cli = _replay(res, tmp_path / "cli_calib")
     assert cli.read_text() == (tmp_path / "calib" / "calib.toml").read_text()
 
-    dep = panels.depth_widget(viewer)
+    dep = panels.DepthWidget(viewer)
     res = _run(qtbot, dep, views=capture / "views.tif", out=tmp_path / "depth", candidates=8)
     assert res.status == "done", res.error
     disp = viewer.layers["disparity"]
@@ -144,7 +141,7 @@ def test_calibrate_depth_motion_evaluate_widgets(make_napari_viewer, qtbot, capt
     rng = np.random.default_rng(3)
     base = rng.random((64, 64)).astype(np.float32)
     write_views(tmp_path / "v64.tif", np.broadcast_to(base, (5, 5, 64, 64)).copy(), CFG)
-    mot = panels.motion_widget(viewer)
+    mot = panels.MotionWidget(viewer)
     res = _run(qtbot, mot, views=tmp_path / "v64.tif", out=tmp_path / "motion")
     assert res.status == "done", res.error
     corrected = read_views(tmp_path / "motion" / "views.tif")
@@ -158,7 +155,7 @@ def test_calibrate_depth_motion_evaluate_widgets(make_napari_viewer, qtbot, capt
     truth = (xx - 40 > 0.1 * (yy - 40)).astype(np.float32)
     tifffile.imwrite(tmp_path / "truth.tif", truth)
     tifffile.imwrite(tmp_path / "edge.tif", gaussian_filter(truth, 1.5).astype(np.float32))
-    ev = panels.evaluate_widget(viewer)
+    ev = panels.EvaluateWidget(viewer)
     res = _run(qtbot, ev, result=tmp_path / "edge.tif", truth=tmp_path / "truth.tif",
                roi="10,70,20,60", out=tmp_path / "eval")
     assert res.status == "done", res.error
@@ -172,13 +169,13 @@ def test_calibrate_depth_motion_evaluate_widgets(make_napari_viewer, qtbot, capt
     assert json.loads((cli / "evaluation.json").read_text())["mtf"] == saved["mtf"]
 
 
-@pytest.mark.parametrize("delta", [1, -2])
-def test_explore_epi_slope_and_pupil_map(make_napari_viewer, tmp_path, delta):
+def test_explore_epi_slope_and_pupil_map(make_napari_viewer, tmp_path):
     """Views of a scene at disparity δ (view (u, v) = the centre view moved δ·(v − c) along x):
     the EPI's rows are those views' profiles, shifted δ per view; the pupil map under the
     cursor is views[:, :, Y, X]."""
     from metasensor.napari.explore import ExploreWidget
 
+    delta = -2
     rng = np.random.default_rng(4)
     base = rng.random((20, 40)).astype(np.float32)
     gain = 1 + np.arange(5, dtype=np.float32)[:, None, None, None]
@@ -187,8 +184,15 @@ def test_explore_epi_slope_and_pupil_map(make_napari_viewer, tmp_path, delta):
     write_views(tmp_path / "shifted.tif", views, CFG)
     viewer = make_napari_viewer()
     viewer.open(str(tmp_path / "shifted.tif"), plugin="metasensor")
-    ex = ExploreWidget(viewer)
-    assert ex.views is viewer.layers["shifted"]
+    # every dock of the manifest, as napari's Plugins menu makes it (the viewer handed over)
+    for name, cls in (("Calibrate", panels.CalibrateWidget), ("Realign", panels.RealignWidget),
+                      ("Reconstruct", panels.ReconstructWidget), ("Motion", panels.MotionWidget),
+                      ("Depth", panels.DepthWidget), ("Evaluate", panels.EvaluateWidget),
+                      ("Explore", ExploreWidget)):
+        _, widget = viewer.window.add_plugin_dock_widget("metasensor", name)
+        assert isinstance(widget, cls) and widget.viewer is not None
+    ex = widget
+    assert ex.views.name == "shifted"
     img = ex.show_epi((7, 10), (7, 30))
     assert img.shape == (5, 21)
     np.testing.assert_allclose(img, views[2, :, 7, 10:31], rtol=1e-6)
@@ -196,7 +200,7 @@ def test_explore_epi_slope_and_pupil_map(make_napari_viewer, tmp_path, delta):
     ex.start_line()  # the drawn line goes through the same code
     ex.line_layer.add_lines(np.array([[7.0, 10.0], [7.0, 30.0]]))
     np.testing.assert_allclose(ex.epi_image, img)
-    layer = viewer.layers["shifted"]
+    layer = ex.views
     viewer.cursor.position = layer.data_to_world((0, 0, 11, 23))
     assert ex.pupil_at == (11, 23)
     np.testing.assert_array_equal(ex.pupil_image, views[:, :, 11, 23])

@@ -15,7 +15,7 @@ import napari
 import numpy as np
 from magicgui import widgets as mw
 
-__all__ = ["epi", "pupil_map", "ExploreWidget", "explore_widget"]
+__all__ = ["epi", "pupil_map", "ExploreWidget"]
 
 
 def epi(views, p0, p1, samples: int | None = None) -> tuple[np.ndarray, str]:
@@ -76,9 +76,9 @@ class ExploreWidget(mw.Container):
     """The Explore dock: pick a view-stack layer; draw a line (an "EPI line" shapes layer) for
     the EPI; move the cursor over the views for the pupil map."""
 
-    def __init__(self, viewer) -> None:
+    def __init__(self, napari_viewer: napari.viewer.Viewer) -> None:
         super().__init__(labels=True)
-        self.viewer = viewer
+        viewer = self.viewer = napari_viewer
         self.layer_box = mw.ComboBox(name="views", label="view stack",
                                      choices=self._views_layers,
                                      tooltip="the 4-D (u, v, y, x) layer to explore")
@@ -169,7 +169,3 @@ class ExploreWidget(mw.Container):
         self.pupil_canvas.draw_idle()
         return image
 
-
-def explore_widget(viewer: napari.viewer.Viewer) -> ExploreWidget:
-    """npe2 widget factory: the Explore dock."""
-    return ExploreWidget(viewer)

@@ -16,8 +16,8 @@ import napari
 from metasensor.napari import readers
 from metasensor.napari.widgets import CommandWidget
 
-__all__ = ["calibrate_widget", "realign_widget", "reconstruct_widget", "motion_widget",
-           "depth_widget", "evaluate_widget", "add_layers"]
+__all__ = ["CalibrateWidget", "RealignWidget", "ReconstructWidget", "MotionWidget",
+           "DepthWidget", "EvaluateWidget", "add_layers"]
 
 _ORDERS = ["row-major", "serpentine"]
 
@@ -37,13 +37,12 @@ def add_layers(viewer, tuples) -> list:
     return added
 
 
-def _prefill(viewer, widget: CommandWidget, name: str, kinds) -> CommandWidget:
+def _prefill(viewer, widget: CommandWidget, name: str, kinds) -> None:
     """Start the input field at the file of the selected layer when it is of a fitting kind."""
     layer = viewer.layers.selection.active if viewer is not None else None
     meta = layer.metadata.get("metasensor", {}) if layer is not None else {}
     if meta.get("kind") in kinds and meta.get("source"):
         widget.fields[name].value = meta["source"]
-    return widget
 
 
 def _show_folder(widget: CommandWidget, result) -> None:
@@ -54,14 +53,16 @@ def _show_views(widget: CommandWidget, result) -> None:
     add_layers(widget.viewer, [readers.read_views_file(result.out / widget.out_name)])
 
 
-def calibrate_widget(viewer: napari.viewer.Viewer) -> CommandWidget:
+class CalibrateWidget(CommandWidget):
     """Calibrate: the lenslet grid found on a white (or textured) frame, drawn over that frame,
     with the fit's figures (pitch, rotation, centre, lenslets kept, scan-phase offsets)."""
-    w = CommandWidget(viewer, "calibrate", ["white", "out", "config", "scan", "order", "moving",
-                                            "flat"],
-                      choices={"order": _ORDERS, "moving": ["mla", "image"]},
-                      out_name="calib.toml", on_done=_show_calibration)
-    return _prefill(viewer, w, "white", ("frames",))
+
+    def __init__(self, napari_viewer: napari.viewer.Viewer | None = None) -> None:
+        super().__init__(napari_viewer, "calibrate", ["white", "out", "config", "scan", "order",
+                                                      "moving", "flat"],
+                         choices={"order": _ORDERS, "moving": ["mla", "image"]},
+                         out_name="calib.toml", on_done=_show_calibration)
+        _prefill(napari_viewer, self, "white", ("frames",))
 
 
 def _show_calibration(widget: CommandWidget, result) -> None:
@@ -84,61 +85,76 @@ def _show_calibration(widget: CommandWidget, result) -> None:
     widget.status.value = "\n".join(lines)
 
 
-def realign_widget(viewer: napari.viewer.Viewer) -> CommandWidget:
+class RealignWidget(CommandWidget):
     """Realign: raw frames (and a calibration) into a view stack, shown as (u, v, y, x)."""
-    w = CommandWidget(viewer, "realign", ["raw_path", "out", "calib_path", "config", "scan",
-                                          "order", "moving", "offsets", "method", "apply_flat",
-                                          "dtype"],
-                      choices={"order": _ORDERS, "moving": ["mla", "image"],
-                               "offsets": ["measure", "calib", "nominal"],
-                               "method": ["lanczos", "spline", "cubic"],
-                               "dtype": ["float32", "input"]},
-                      out_name="views.tif", on_done=_show_views)
-    return _prefill(viewer, w, "raw_path", ("frames",))
+
+    def __init__(self, napari_viewer: napari.viewer.Viewer | None = None) -> None:
+        super().__init__(napari_viewer, "realign",
+                         ["raw_path", "out", "calib_path", "config", "scan", "order", "moving",
+                          "offsets", "method", "apply_flat", "dtype"],
+                         choices={"order": _ORDERS, "moving": ["mla", "image"],
+                                  "offsets": ["measure", "calib", "nominal"],
+                                  "method": ["lanczos", "spline", "cubic"],
+                                  "dtype": ["float32", "input"]},
+                         out_name="views.tif", on_done=_show_views)
+        _prefill(napari_viewer, self, "raw_path", ("frames",))
 
 
-def reconstruct_widget(viewer: napari.viewer.Viewer) -> CommandWidget:
+class ReconstructWidget(CommandWidget):
     """Reconstruct: ISA with multisite blocks and DAO; shows the image and the per-block
     wavefronts (a grid of pupil maps beside the image, one per block)."""
-    w = CommandWidget(viewer, "reconstruct",
-                      ["views", "out", "config", "method", "blocks", "overlap", "solver",
-                       "register_views", "iterations", "subsets", "view_radius", "zernike",
-                       "field_zernike", "system", "psf", "device", "zarr_out"],
-                      choices={"method": ["isa", "wave", "geometric"], "solver": ["hqs", "rl"],
-                               "device": ["cpu", "cuda"]},
-                      on_done=_show_folder)
-    return _prefill(viewer, w, "views", ("views",))
+
+    def __init__(self, napari_viewer: napari.viewer.Viewer | None = None) -> None:
+        super().__init__(napari_viewer, "reconstruct",
+                         ["views", "out", "config", "method", "blocks", "overlap", "solver",
+                          "register_views", "iterations", "subsets", "view_radius", "zernike",
+                          "field_zernike", "system", "psf", "device", "zarr_out"],
+                         choices={"method": ["isa", "wave", "geometric"],
+                                  "solver": ["hqs", "rl"], "device": ["cpu", "cuda"]},
+                         on_done=_show_folder)
+        _prefill(napari_viewer, self, "views", ("views",))
 
 
-def motion_widget(viewer: napari.viewer.Viewer) -> CommandWidget:
+class MotionWidget(CommandWidget):
     """Motion: scan artefacts of moving objects removed; the corrected views as a layer."""
-    w = CommandWidget(viewer, "motion", ["views", "out", "scan_order", "period", "reference",
-                                         "mode", "flow_view", "method", "scatter"],
-                      choices={"scan_order": _ORDERS, "mode": ["object", "turbulence"],
-                               "method": ["dis", "farneback"], "scatter": ["linear", "cubic"]},
-                      out_name="views.tif", on_done=_show_views)
-    return _prefill(viewer, w, "views", ("views",))
+
+    def __init__(self, napari_viewer: napari.viewer.Viewer | None = None) -> None:
+        super().__init__(napari_viewer, "motion",
+                         ["views", "out", "scan_order", "period", "reference", "mode",
+                          "flow_view", "method", "scatter"],
+                         choices={"scan_order": _ORDERS, "mode": ["object", "turbulence"],
+                                  "method": ["dis", "farneback"],
+                                  "scatter": ["linear", "cubic"]},
+                         out_name="views.tif", on_done=_show_views)
+        _prefill(napari_viewer, self, "views", ("views",))
 
 
-def depth_widget(viewer: napari.viewer.Viewer) -> CommandWidget:
+class DepthWidget(CommandWidget):
     """Depth: disparity, image-side depth and confidence maps on the views' grid."""
-    w = CommandWidget(viewer, "depth", ["views", "out", "system", "config", "candidates",
-                                        "disparity_range", "occlusion", "radius", "device"],
-                      choices={"device": ["cpu", "cuda"]}, on_done=_show_folder)
-    return _prefill(viewer, w, "views", ("views",))
+
+    def __init__(self, napari_viewer: napari.viewer.Viewer | None = None) -> None:
+        super().__init__(napari_viewer, "depth",
+                         ["views", "out", "system", "config", "candidates", "disparity_range",
+                          "occlusion", "radius", "device"],
+                         choices={"device": ["cpu", "cuda"]}, on_done=_show_folder)
+        _prefill(napari_viewer, self, "views", ("views",))
 
 
-def evaluate_widget(viewer: napari.viewer.Viewer) -> CommandWidget:
+class EvaluateWidget(CommandWidget):
     """Evaluate: PSNR, SSIM and slanted-edge MTF; a metrics table and the MTF curves."""
-    from magicgui import widgets as mw
 
-    w = CommandWidget(viewer, "evaluate", ["result", "truth", "chart", "roi", "pixel_pitch",
-                                           "out"], on_done=_show_evaluation)
-    w.table = mw.Table(value={"metric": [], "value": []}, name="metrics_table")
-    w.append(w.table)
-    w.figure, w.canvas = _mtf_canvas()
-    w.native.layout().addWidget(w.canvas)
-    return _prefill(viewer, w, "result", ("image",))
+    def __init__(self, napari_viewer: napari.viewer.Viewer | None = None) -> None:
+        from magicgui import widgets as mw
+
+        super().__init__(napari_viewer, "evaluate",
+                         ["result", "truth", "chart", "roi", "pixel_pitch", "out"],
+                         on_done=_show_evaluation)
+        self.table = mw.Table(value={"metric": [], "value": []}, name="metrics_table")
+        self.append(self.table)
+        self.metric_rows: dict = {"metric": [], "value": []}
+        self.figure, self.canvas = _mtf_canvas()
+        self.native.layout().addWidget(self.canvas)
+        _prefill(napari_viewer, self, "result", ("image",))
 
 
 def _mtf_canvas():
