@@ -45,6 +45,12 @@ def _prefill(viewer, widget: CommandWidget, name: str, kinds) -> None:
         widget.fields[name].value = meta["source"]
 
 
+def _names(command: str) -> set[str]:
+    from metasensor.napari.widgets import cli_params
+
+    return {p.name for p in cli_params(command)}
+
+
 def _show_folder(widget: CommandWidget, result) -> None:
     add_layers(widget.viewer, readers.read_result_folder(result.out))
 
@@ -147,7 +153,8 @@ class EvaluateWidget(CommandWidget):
         from magicgui import widgets as mw
 
         super().__init__(napari_viewer, "evaluate",
-                         ["result", "truth", "chart", "roi", "pixel_pitch", "out"],
+                         [n for n in ("result", "truth", "chart", "roi", "pixel_pitch",
+                                      "data_range", "out") if n in _names("evaluate")],
                          on_done=_show_evaluation)
         self.table = mw.Table(value={"metric": [], "value": []}, name="metrics_table")
         self.append(self.table)

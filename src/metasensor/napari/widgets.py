@@ -27,7 +27,9 @@ def cli_params(command: str) -> list:
     from metasensor.cli import app
 
     group = typer.main.get_command(app)
-    return list(group.commands[command].params)
+    ctx = group.context_class(group, info_name="metasensor")
+    _, cmd, _ = group.resolve_command(ctx, [command])  # a lazy group loads the command here
+    return list(cmd.params)
 
 
 def _kind(param) -> str:
