@@ -49,7 +49,7 @@ def main(argv=None) -> Path:
     ap.add_argument("--work", type=Path, help="working folder (default: a temporary one)")
     ap.add_argument("--size", type=int, default=192, help="scene size of the simulated capture")
     ap.add_argument("--blocks", default="2x2")
-    ap.add_argument("--timeout", type=float, default=1800.0)
+    ap.add_argument("--timeout", type=float, default=3000.0)
     args = ap.parse_args(argv)
 
     import napari
@@ -65,14 +65,18 @@ def main(argv=None) -> Path:
     if "metasensor" not in pm:  # a checkout newer than its install: the manifest itself
         pm.register(npe2.PluginManifest.from_file(ROOT / "src/metasensor/napari/napari.yaml"))
 
+    from napari.settings import get_settings
+    from qtpy.QtCore import Qt
+
+    get_settings().application.gui_notification_level = "error"  # no info/warning toasts
     viewer = napari.Viewer(title="metasensor in napari", show=True)
-    viewer.window._qt_window.resize(1600, 1000)
+    viewer.window._qt_window.resize(1800, 1050)
     app = napari.qt.get_qapp()
     viewer.open(str(cap / "views.tif"), plugin="metasensor")
     views = viewer.layers["views"]
     c = views.data.shape[0] // 2
     viewer.dims.current_step = (c, c) + tuple(viewer.dims.current_step[2:])
-    _, rec = viewer.window.add_plugin_dock_widget("metasensor", "Reconstruct")
+    rec_dock, rec = viewer.window.add_plugin_dock_widget("metasensor", "Reconstruct")
     rec.set(views=cap / "views.tif", out=work / "result", method="wave", blocks=args.blocks)
     rec.start()
     _wait(app, rec, args.timeout)
@@ -80,7 +84,8 @@ def main(argv=None) -> Path:
         raise SystemExit(f"reconstruct {rec.outcome.status}: {rec.outcome.error}")
     views.visible = False
     ex = ExploreWidget(viewer)
-    viewer.window.add_dock_widget(ex, name="Explore", area="right")
+    ex_dock = viewer.window.add_dock_widget(ex, name="Explore", area="right")
+    viewer.window._qt_window.resizeDocks([rec_dock, ex_dock], [560, 560], Qt.Horizontal)
     h, w = views.data.shape[-2:]
     ex.layer_box.value = views
     ex.start_line()

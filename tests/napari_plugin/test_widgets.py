@@ -74,6 +74,7 @@ def test_realign_and_reconstruct_widgets_match_the_cli(make_napari_viewer, qtbot
     wf = kinds["wavefront"]  # a 2 x 2 grid of pupil maps beside the image
     assert wf.metadata["metasensor"]["blocks"] == [2, 2]
     assert np.nanmax(wf.data) > 0.3  # 0.3 λ r.m.s. defocus peaks at sqrt(3) x 0.3 at the rim
+    assert ".partial-" not in res.stdout + rec.status.value  # the final folder is named
     summary = json.loads((tmp_path / "result" / "summary.json").read_text())
     assert summary["blocks"] == [2, 2] and summary["replay"]["settings"]["blocks"] == "2x2"
     assert summary["replay"]["command"].startswith("metasensor reconstruct ")

@@ -172,8 +172,9 @@ class Job:
             if code != 0:
                 return JobResult("failed", run.out, "".join(out_text), _one_line(err_text, code),
                                  run.argv())
-            self._publish("".join(out_text))
-            return JobResult("done", run.out, "".join(out_text), argv=run.argv())
+            stdout = "".join(out_text).replace(str(self.staging), str(run.out))
+            self._publish(stdout)
+            return JobResult("done", run.out, stdout, argv=run.argv())
         finally:
             if self._proc is not None and self._proc.poll() is None:  # generator closed early
                 self._proc.kill()

@@ -86,6 +86,7 @@ class CommandWidget(mw.Container):
         self.run_button = mw.PushButton(text=f"Run {command}")
         self.cancel_button = mw.PushButton(text="Cancel", enabled=False)
         self.status = mw.Label(value="")
+        self.status.native.setWordWrap(True)  # long messages wrap instead of widening the dock
         self.run_button.changed.connect(self.start)
         self.cancel_button.changed.connect(self.cancel)
         self.extend([mw.Container(widgets=[self.run_button, self.cancel_button],
