@@ -21,9 +21,11 @@ import queue
 import re
 import shlex
 import shutil
+import signal
 import subprocess
 import sys
 import threading
+import time
 import uuid
 from collections.abc import Iterator
 from dataclasses import dataclass, field
@@ -117,6 +119,7 @@ class Job:
         self.python = python or sys.executable
         self._proc: subprocess.Popen | None = None
         self._cancelled = threading.Event()
+        self._cancel_time = 0.0
         self.staging = run.out.parent / f".{run.out.name}.partial-{uuid.uuid4().hex[:8]}"
 
     @property
@@ -124,11 +127,13 @@ class Job:
         return self._cancelled.is_set()
 
     def cancel(self) -> None:
-        """End the running command (its partial output is removed by :meth:`steps`)."""
+        """Interrupt the running command (SIGINT, as Ctrl-C would: it cleans up after itself;
+        :meth:`steps` ends it if it has not stopped 5 s later and removes the partial output)."""
         self._cancelled.set()
+        self._cancel_time = time.monotonic()
         proc = self._proc
         if proc is not None and proc.poll() is None:
-            proc.terminate()
+            proc.send_signal(signal.SIGINT)
 
     def steps(self) -> Iterator[Progress]:
         """Generator: run the command; yields progress; returns the JobResult."""
@@ -143,7 +148,7 @@ class Job:
                 [self.python, "-m", "metasensor.cli", *argv], stdout=subprocess.PIPE,
                 stderr=subprocess.PIPE, stdin=subprocess.DEVNULL)
             if self.cancelled:  # cancelled while the process started
-                self._proc.terminate()
+                self._proc.send_signal(signal.SIGINT)
             out_text: list[str] = []
             readers = [threading.Thread(target=_pump, args=(self._proc.stderr, chunks),
                                         daemon=True),
@@ -156,6 +161,8 @@ class Job:
                 try:
                     chunk = chunks.get(timeout=0.1)
                 except queue.Empty:
+                    if self.cancelled and time.monotonic() - self._cancel_time > 5.0:
+                        self._proc.kill()  # did not stop on SIGINT
                     yield None  # a chance to quit for the worker; no news
                     continue
                 if chunk is None:
@@ -180,6 +187,9 @@ class Job:
                 self._proc.kill()
                 self._proc.wait()
             shutil.rmtree(self.staging, ignore_errors=True)
+            for left in self.staging.parent.glob(f".{self.staging.name}*"):  # e.g. a lock file
+                if left.is_file():  # a command ended by force leaves beside its output
+                    left.unlink(missing_ok=True)
 
     def _publish(self, stdout: str) -> None:
         """Record the run in summary.json, then move the staged outputs into the chosen folder
