@@ -13,6 +13,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from metasensor.io.atomic import StagedFolder, atomic_write_text
 from metasensor.io.views import read_views, write_views
@@ -64,12 +65,25 @@ def _hidden(root: Path) -> list[str]:
 
 
 def test_interrupted_writers_leave_complete_outputs_or_none(tmp_path):
+    # interrupt points after start, each writer at another; Ctrl-C and kill -9
+    _interrupt_writers(tmp_path, ((0.05, signal.SIGINT), (0.3, signal.SIGKILL),
+                                  (0.6, signal.SIGINT), (1.0, signal.SIGKILL)))
+
+
+@pytest.mark.slow
+def test_many_interrupt_points(tmp_path):
+    rng = np.random.default_rng(7)
+    for k in range(5):  # 20 more interrupts at random points of the writers' first 2 s
+        sigs = (signal.SIGINT, signal.SIGKILL) * 2
+        plan = tuple((float(t), s) for t, s in zip(rng.uniform(0, 2, 4), sigs, strict=True))
+        (tmp_path / str(k)).mkdir()
+        _interrupt_writers(tmp_path / str(k), plan)
+
+
+def _interrupt_writers(tmp_path, plan):
     src_dir = str(Path(__file__).resolve().parents[2] / "src")
     env = {**os.environ, "PYTHONPATH": src_dir, "OMP_NUM_THREADS": "1"}
     shared = tmp_path / "cache"
-    # interrupt points after start, each writer at another; Ctrl-C and kill -9
-    plan = ((0.05, signal.SIGINT), (0.3, signal.SIGKILL), (0.6, signal.SIGINT),
-            (1.0, signal.SIGKILL))
     runs = []
     for i, (_, sig) in enumerate(plan):
         root = tmp_path / f"w{i}"

@@ -116,3 +116,9 @@ def test_big_endian_frames_and_bounded_reads(tmp_path, monkeypatch):
     os.mkfifo(tmp_path / "pipe.npy")
     refused("reconstruct", tmp_path / "be.tif", "--field-zernike", tmp_path / "pipe.npy",
             "--out", tmp_path / "r", match="not a regular file")
+
+
+def test_a_disparity_range_beyond_the_views_is_refused():
+    views = np.random.default_rng(0).random((3, 3, 20, 20)).astype(np.float32)
+    with pytest.raises(ValueError, match="disparity_range"):
+        ms.estimate_depth(views, CFG, disparity_range=(-1e6, 1e6))

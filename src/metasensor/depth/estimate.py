@@ -143,6 +143,9 @@ def estimate_depth(views, cfg: SystemConfig, calibration=None, *, candidates: in
         raise ValueError(f"disparity_range must be (low, high) with low < high, "
                          f"got {disparity_range!r}")
     h, w = arr.shape[2:]
+    if disparity_range is not None and max(map(abs, disparity_range)) * c > max(h, w):
+        raise ValueError(f"disparity_range {tuple(disparity_range)} shifts the outer views by "
+                         f"more than the {h}x{w} views (at most ±{max(h, w) / max(c, 1):.3g})")
     mask = cfg.view_mask() if view_mask is None else np.asarray(view_mask, dtype=bool)
     if mask.shape != (n, n):
         raise ValueError(f"view_mask must have shape {(n, n)}, got {mask.shape}")

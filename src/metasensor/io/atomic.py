@@ -214,11 +214,19 @@ def replace_tree(new: Path, final: Path) -> None:
             os.rename(old, final)
         raise
     if old is not None:
-        if old.is_dir() and not old.is_symlink():
-            shutil.rmtree(old, ignore_errors=True)
-        else:
-            with contextlib.suppress(OSError):
-                old.unlink()
+        try:
+            _remove(old)
+        except KeyboardInterrupt:  # finish removing what is no longer anyone's, then stop
+            _remove(old)
+            raise
+
+
+def _remove(path: Path) -> None:
+    if path.is_dir() and not path.is_symlink():
+        shutil.rmtree(path, ignore_errors=True)
+    else:
+        with contextlib.suppress(OSError):
+            path.unlink()
 
 
 class StagedFolder:
@@ -236,14 +244,14 @@ class StagedFolder:
         self.names = set(names)
         if self.out.exists() and not self.out.is_dir():
             raise ValueError(f"--out {self.out} exists and is not a folder")
+        self.path = self.out.parent / sibling_name(self.out, "tmp")
+        _on_exit(self.discard)  # before the folder exists: no moment without a cleanup
         try:
             self.out.parent.mkdir(parents=True, exist_ok=True)
             remove_stale(self.out)
-            self.path = self.out.parent / sibling_name(self.out, "tmp")
             self.path.mkdir()
         except OSError as exc:
             raise write_error(self.out, exc) from None
-        _on_exit(self.discard)
 
     def discard(self) -> None:
         """Remove the temporary folder (nothing, once committed)."""

@@ -43,6 +43,9 @@ def register(app: typer.Typer) -> None:
         if scheduler is not None and scenario != "gigapixel":
             raise typer.BadParameter("applies to --scenario gigapixel only",
                                      param_hint="--scheduler")
+        from metasensor.io.guard import guard
+
+        guard([], [], folders=[out])  # a file in the way is refused; two runs do not interleave
         if scenario != "single-lens":
             summary = run_scenario(scenario, out, seed=seed, scheduler=scheduler)
             for row in summary["table"]:
