@@ -39,6 +39,7 @@ print(json.dumps(results))
 """
 
 
+@pytest.mark.slow  # an interpreter computing a PSF bank under a file-size limit
 def test_a_full_disk_is_one_line_naming_the_file(tmp_path):
     cfg = ms.SystemConfig(nnum=3, mla_pitch=3 * 4.6e-6, mla_focal=3 * 46e-6, scan=3)
     cfg.to_toml(tmp_path / "cfg.toml")

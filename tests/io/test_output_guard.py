@@ -133,3 +133,29 @@ def test_a_second_writer_of_the_same_output_is_refused(tmp_path, monkeypatch):
     monkeypatch.undo()  # a real command, failing after its guard: its locks go too
     code, err = run_cli("psf", "--config", tmp_path / "missing.toml", "--out", tmp_path / "p.h5")
     assert code == 2 and not list(tmp_path.iterdir())
+
+
+def test_result_folders_swap_whole_and_keep_the_users_files(tmp_path):
+    from metasensor.io.atomic import StagedFolder
+
+    def write(out, files):
+        staged = StagedFolder(out, ["a.txt", "b.txt"])
+        for name, text in files.items():
+            (staged.path / name).write_text(text)
+        return staged.commit()
+
+    out = tmp_path / "res"
+    write(out, {"a.txt": "1", "b.txt": "1"})
+    write(out, {"a.txt": "2"})  # an earlier run's b.txt would contradict this one: gone
+    assert sorted(p.name for p in out.iterdir()) == ["a.txt"]
+    (out / "notes.txt").write_text("the user's")
+    write(out, {"a.txt": "3", "b.txt": "3"})  # a folder holding the user's file keeps it
+    assert {p.name: p.read_text() for p in out.iterdir()} == {"a.txt": "3", "b.txt": "3",
+                                                              "notes.txt": "the user's"}
+    staged = StagedFolder(out, ["a.txt"])
+    (staged.path / "a.txt").write_text("never committed")
+    staged.discard()  # what an error or Ctrl-C does: the folder as it was, no temporary
+    assert (out / "a.txt").read_text() == "3" and sorted(os.listdir(tmp_path)) == ["res"]
+    (tmp_path / "afile").write_text("x")
+    with pytest.raises(ValueError, match="not a folder"):
+        StagedFolder(tmp_path / "afile", ["a.txt"])
