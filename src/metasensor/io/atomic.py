@@ -240,7 +240,7 @@ class StagedFolder:
     """
 
     def __init__(self, out: str | Path, names: Iterable[str]) -> None:
-        self.out = Path(out)
+        self.out = Path(os.path.abspath(out))  # "--out ." has a parent to build beside
         self.names = set(names)
         if self.out.exists() and not self.out.is_dir():
             raise ValueError(f"--out {self.out} exists and is not a folder")
@@ -262,7 +262,8 @@ class StagedFolder:
         out, stage = self.out, self.path
         try:
             foreign = set(os.listdir(out)) - self.names if out.is_dir() else set()
-            if not foreign:
+            here = Path(os.getcwd())
+            if not foreign and here != out and out not in here.parents:  # never move the cwd
                 replace_tree(stage, out)
                 return out
             for name in sorted(self.names):
