@@ -122,3 +122,17 @@ def test_a_disparity_range_beyond_the_views_is_refused():
     views = np.random.default_rng(0).random((3, 3, 20, 20)).astype(np.float32)
     with pytest.raises(ValueError, match="disparity_range"):
         ms.estimate_depth(views, CFG, disparity_range=(-1e6, 1e6))
+
+
+def test_a_description_that_is_not_utf8_is_named_once(tmp_path, capsys):
+    import json
+
+    from metasensor.io.views import read_config_from_views, stored_extras
+
+    meta = {**CFG.to_dict(), "metasensor": {"unit": "UNIT"}}
+    raw = json.dumps(meta).encode().replace(b"UNIT", "µm".encode("cp1252"))
+    tifffile.imwrite(tmp_path / "latin.tif", np.ones((9, 4, 4), np.float32), description=raw,
+                     metadata=None)
+    assert read_config_from_views(tmp_path / "latin.tif") == CFG
+    assert stored_extras(tmp_path / "latin.tif") == {"unit": "µm"}
+    assert capsys.readouterr().err.count("not UTF-8") == 1

@@ -193,6 +193,7 @@ def _stored_meta(path: Path) -> dict | None:
         try:  # page 0 only (the rest of the chain is read_views' to check)
             with warned, tifffile.TiffFile(path) as tif:
                 desc = tif.pages.first.description
+                utf8 = _utf8_description(tif)
         except Exception as exc:
             detail = warned.messages[0] if warned.messages else f"{type(exc).__name__}: {exc}"
             raise unreadable(path, detail) from None
@@ -202,7 +203,31 @@ def _stored_meta(path: Path) -> dict | None:
             meta = json.loads(desc)
         except (json.JSONDecodeError, RecursionError):  # not JSON, or nested thousands deep
             return None
+        if not utf8 and isinstance(meta, dict) and path not in _NOTED:  # Windows-1252
+            import sys
+
+            _NOTED.add(path)
+            print(f"note: {path.name}'s description is not UTF-8 text; read as Windows-1252",
+                  file=sys.stderr)
     return meta if isinstance(meta, dict) else None
+
+
+_NOTED: set[Path] = set()  # files whose non-UTF-8 description was named once
+
+
+def _utf8_description(tif) -> bool:
+    """Whether page 0's ImageDescription bytes are UTF-8 (tifffile decodes others silently)."""
+    tag = tif.pages.first.tags.get(270)
+    if tag is None or not isinstance(tag.value, str) or tag.value.isascii():
+        return True
+    try:
+        tif.filehandle.seek(tag.valueoffset)
+        tif.filehandle.read(tag.count).rstrip(b"\0").decode("utf-8")
+    except UnicodeDecodeError:
+        return False
+    except Exception:  # noqa: BLE001 - unreadable bytes: the description stands as decoded
+        return True
+    return True
 
 
 def read_config_from_views(path: str | Path, strict: bool = True) -> SystemConfig | None:
