@@ -25,6 +25,7 @@ def f(tmp_path_factory):
     rng = np.random.default_rng(0)
     views = 1 + rng.random((3, 3, 16, 16)).astype(np.float32)
     write_views(root / "views.tif", views, CFG)
+    write_views(root / "tiny.tif", views[:, :, :3, :3], CFG)
     CFG.to_toml(root / "cfg.toml")
     write_views(root / "bad.zarr", views, CFG)  # one chunk replaced by garbage
     chunk = next(p for p in (root / "bad.zarr").rglob("*") if p.is_file() and p.name == "0")
@@ -79,6 +80,7 @@ def test_damaged_files_exit_2_naming_the_file(f):
          "real numbers"),
         (["calibrate-aberration", f / "complex_views.tif", "--config", f / "cfg.toml", "--out",
           f / "s.h5"], "real numbers"),
+        (["calibrate-aberration", f / "tiny.tif", "--out", f / "s.h5"], "too small"),
         (["reconstruct", f / "views.tif", "--config", f / "cfg.toml", "--solver", "hqs",
           "--iterations", "3", "--out", f / "r"], "--iterations"),
     ]

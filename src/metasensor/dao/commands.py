@@ -68,6 +68,9 @@ def register(app: typer.Typer) -> None:
         if cfg is None:
             raise ValueError(f"{capture} carries no system configuration: pass --config")
         views = read_views(capture, nnum=cfg.nnum)
+        if min(views.shape[2:]) < 4:  # named here, not as the registration's "movings"
+            raise ValueError(f"{capture}: views of {tuple(views.shape[2:])} samples are too "
+                             "small to calibrate (at least 4 x 4)")
         sa = calibrate_system(views, cfg, blocks=parse_pair(blocks, "--blocks"),
                               grid=parse_pair(grid, "--grid"), iterations=iterations,
                               threshold=threshold, progress=True)
