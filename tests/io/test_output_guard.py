@@ -131,7 +131,8 @@ def test_a_second_writer_of_the_same_output_is_refused(tmp_path, monkeypatch):
             g._release(item)
     assert not list(tmp_path.iterdir())  # the lock file goes with the lock
     monkeypatch.undo()  # a real command, failing after its guard: its locks go too
-    code, err = run_cli("psf", "--config", tmp_path / "missing.toml", "--out", tmp_path / "p.h5")
+    code, err = run_cli("psf", "--config", tmp_path / "missing.toml", "--out",
+                        tmp_path / "new" / "p.h5")  # the folder made for its lock goes too
     assert code == 2 and not list(tmp_path.iterdir())
 
 

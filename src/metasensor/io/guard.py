@@ -24,7 +24,7 @@ from metasensor.io.atomic import _on_exit, command_context, is_own_zarr, sibling
 
 __all__ = ["guard", "npy_argument", "OutputLocked"]
 
-_held: list[tuple[int, Path]] = []
+_held: list[tuple[int, Path, tuple]] = []
 
 
 class OutputLocked(ValueError):
@@ -147,11 +147,21 @@ def _lock_all(paths: list[Path]) -> None:
     _on_exit(lambda: [_release(t) for t in taken if t in _held])  # however the command ends
 
 
-def _lock(p: Path) -> tuple[int, Path]:
+def _lock(p: Path) -> tuple[int, Path, tuple]:
     """Take ``.<name>.lock`` beside ``p`` (created, and removed on release)."""
+    p = Path(os.path.abspath(p))
+    try:
+        return _try_lock(p)
+    except OSError as exc:  # a read-only or full folder: named, one line
+        from metasensor.io.atomic import write_error
+
+        raise write_error(p, exc) from None
+
+
+def _try_lock(p: Path) -> tuple[int, Path, tuple]:
     import fcntl
 
-    p = Path(os.path.abspath(p))
+    made = [d for d in (p.parent, *p.parent.parents) if not d.exists()]
     p.parent.mkdir(parents=True, exist_ok=True)
     lock = p.parent / sibling_name(p, "lock", pid=False)
     for _ in range(20):
@@ -168,18 +178,21 @@ def _lock(p: Path) -> tuple[int, Path]:
             if os.fstat(fd).st_ino == os.stat(lock).st_ino:
                 os.ftruncate(fd, 0)
                 os.write(fd, f"{os.getpid()}\n".encode())
-                return fd, lock
+                return fd, lock, tuple(made)
         except FileNotFoundError:
             pass
         os.close(fd)
     raise OutputLocked(f"cannot lock {lock}: it keeps being replaced")  # pragma: no cover
 
 
-def _release(item: tuple[int, Path]) -> None:
-    fd, lock = item
+def _release(item: tuple[int, Path, tuple]) -> None:
+    fd, lock, made = item
     if item in _held:
         _held.remove(item)
     with contextlib.suppress(OSError):
         lock.unlink()  # still ours: unlinked before the lock is let go
     with contextlib.suppress(OSError):
         os.close(fd)
+    for d in made:  # folders made only for the lock, left empty by a failed run
+        with contextlib.suppress(OSError):
+            d.rmdir()
