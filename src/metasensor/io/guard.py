@@ -140,11 +140,12 @@ def _lock_all(paths: list[Path]) -> None:
         for p in paths:
             taken.append(_lock(p))
     except BaseException:
-        for item in taken:
+        for item in reversed(taken):  # last made, first removed
             _release(item)
         raise
     _held.extend(taken)
-    _on_exit(lambda: [_release(t) for t in taken if t in _held])  # however the command ends
+    # released however the command ends, the last taken first
+    _on_exit(lambda: [_release(t) for t in reversed(taken) if t in _held])
 
 
 def _lock(p: Path) -> tuple[int, Path, tuple]:
