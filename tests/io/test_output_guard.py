@@ -32,6 +32,8 @@ def files(tmp_path_factory):
     (root / "mydata.zarr").mkdir()
     (root / "mydata.zarr" / "notes.txt").write_text("a user's file")
     (root / "r").mkdir()
+    (root / "r2").mkdir()  # an image.zarr that is a link to the user's folder
+    (root / "r2" / "image.zarr").symlink_to(root / "mydata.zarr")
     np.save(root / "r" / "zernike.npy", np.zeros(15))
     write_views(root / "views.tif", np.ones((15, 15, 4, 4), np.float32), ms.SystemConfig())
     (root / "ev").mkdir()
@@ -57,6 +59,7 @@ def test_every_command_refuses_outputs_over_inputs_or_each_other(files):
           "--png", f / "z.npy"], "would overwrite the input"),
         (["reconstruct", f / "views.tif", "--zernike", f / "r" / "zernike.npy", "--out",
           f / "r"], "would overwrite the input"),
+        (["reconstruct", f / "views.tif", "--out", f / "r2"], "not a Zarr store"),
         (["calibrate", f / "run_00001.tif", "--config", f / "cfg.toml", "--out",
           f / "cfg.toml"], "would overwrite the input"),
         (["calibrate", f / "run_00001.tif", "--figure", f / "k.toml", "--out", f / "k.toml"],
@@ -74,6 +77,7 @@ def test_every_command_refuses_outputs_over_inputs_or_each_other(files):
         (f / "views.h5").unlink()
     assert tree_digest(f) == before  # nothing written, replaced or removed
     assert not [p for p in f.rglob(".*")]  # no lock or temporary left behind
+    assert (f / "mydata.zarr" / "notes.txt").read_text() == "a user's file"
 
 
 def test_named_pipes_are_refused_not_read(files, tmp_path):
