@@ -40,6 +40,22 @@ def npy_argument(text: str | os.PathLike | None) -> Path | None:
     return Path(s) if s.lower().endswith(".npy") else None
 
 
+class _Resolver:
+    """Real paths (links followed) as strings, each folder resolved once."""
+
+    def __init__(self) -> None:
+        self._dirs: dict[str, str] = {}
+
+    def __call__(self, p: Path) -> str:
+        p = Path(os.path.abspath(p))
+        if os.path.islink(p):
+            return os.path.realpath(p)
+        parent = str(p.parent)
+        if parent not in self._dirs:
+            self._dirs[parent] = os.path.realpath(parent)
+        return os.path.join(self._dirs[parent], p.name)
+
+
 def _real(p: Path) -> Path:
     return Path(os.path.realpath(os.path.abspath(p)))
 
@@ -90,7 +106,7 @@ def _check_output(p: Path, store: bool) -> None:
 
 
 def guard(inputs: Iterable, outputs: Iterable, *, folders: Iterable = (),
-          lock: bool = True) -> None:
+          lock: bool | Iterable = True) -> None:
     """Refuse (one-line ``ValueError``) a command whose outputs would replace its inputs.
 
     Parameters
@@ -106,23 +122,40 @@ def guard(inputs: Iterable, outputs: Iterable, *, folders: Iterable = (),
     folders : iterable of path or None
         Result folders the command writes into (their files belong in ``outputs``): refused when
         one is an input or a file; locked like the outputs.
-    lock : bool
-        Hold a lock on every output until the command ends (:class:`OutputLocked` if another
-        run holds one); only inside a command (a click context), not from the API.
+    lock : bool or iterable of path
+        Hold a lock on every output (or on the paths given: one per family of generated names)
+        until the command ends (:class:`OutputLocked` if another run holds one); only inside a
+        command (a click context), not from the API.
     """
     ins = [Path(p) for p in inputs if p is not None]
     outs = [Path(p) for p in outputs if p is not None]
     dirs = [Path(p) for p in folders if p is not None]
     for p in ins:
         _check_input(p)
-    for i, out in enumerate(outs):
-        for other in outs[:i]:
-            if _same(out, other):
-                raise ValueError(f"two outputs of this command are the same file: {other} and "
-                                 f"{out}")
-        for inp in ins:
-            if _same(out, inp) or _within(out, inp) or _within(inp, out):
+    real = _Resolver()
+    in_real = [(p, real(p)) for p in ins]
+    in_ids = {}  # hard links: the same inode under another name
+    for p in ins:
+        with contextlib.suppress(OSError):
+            st = os.stat(p)
+            in_ids[(st.st_dev, st.st_ino)] = p
+    seen: dict[str, Path] = {}
+    for out in outs:
+        r = real(out)
+        other = seen.setdefault(r, out)
+        if other is not out:
+            raise ValueError(f"two outputs of this command are the same file: {other} and "
+                             f"{out}")
+        for inp, ri in in_real:
+            if r == ri or r.startswith(ri + os.sep) or ri.startswith(r + os.sep):
                 raise ValueError(f"output {out} would overwrite the input {inp}")
+        try:
+            st = os.stat(out)
+        except OSError:
+            continue  # not there yet: nothing to compare or replace
+        if (st.st_dev, st.st_ino) in in_ids:
+            raise ValueError(f"output {out} would overwrite the input "
+                             f"{in_ids[(st.st_dev, st.st_ino)]}")
         _check_output(out, store=False)
     for d in dirs:
         if d.exists() and not d.is_dir():
@@ -130,8 +163,10 @@ def guard(inputs: Iterable, outputs: Iterable, *, folders: Iterable = (),
         for inp in ins:
             if _same(d, inp) or _within(d, inp):
                 raise ValueError(f"output {d} would overwrite the input {inp}")
-    if lock and command_context() is not None:
-        _lock_all([*dirs, *(o for o in outs if not any(_within(o, d) for d in dirs))])
+    if lock is not False and command_context() is not None:
+        paths = [*dirs, *(o for o in outs if not any(_within(o, d) for d in dirs))] \
+            if lock is True else [Path(p) for p in lock]
+        _lock_all(paths)
 
 
 def _lock_all(paths: list[Path]) -> None:

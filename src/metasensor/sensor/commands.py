@@ -152,7 +152,8 @@ def realign_cmd(
         n_out = n_frames - tp + 1 if sliding else n_frames // tp
         names = [out] if n_out == 1 else [out.with_name(f"{out.stem}_{k:05d}{out.suffix}")
                                           for k in range(n_out)]
-        guard([raw_path, config, calib_path, _flat_input(calib, calib_path)], names)
+        guard([raw_path, config, calib_path, _flat_input(calib, calib_path)], names,
+              lock=[out])  # one lock for the family of numbered stacks
         stream = tqdm(raw, total=n_frames, desc="realign", unit="frame")
         if calib is not None:
             from metasensor.sensor.calibrate import adapt
