@@ -177,7 +177,7 @@ def register_nonrigid_batch(movings: np.ndarray, reference: np.ndarray,
                             lr: float = 0.05, mask: np.ndarray | None = None,
                             levels: int = 3, device=None, init: np.ndarray | None = None,
                             normalise: bool = True, batch_size: int = 16,
-                            progress: bool = False) -> np.ndarray:
+                            progress: bool = False, tick=None) -> np.ndarray:
     """Register many images to one reference (or to one reference each) at once.
 
     movings: ``(N, H, W)``; reference: ``(H, W)`` or ``(N, H, W)``; grid: ``(rows, cols)`` of
@@ -187,7 +187,9 @@ def register_nonrigid_batch(movings: np.ndarray, reference: np.ndarray,
     levels: pyramid levels (factor 2 each, coarse to fine; 1 = single scale); init: optional
     starting field ``(N, 2, H, W)`` or ``(N, 2, rows, cols)`` control values; batch_size:
     images optimised together (memory bound; the images are independent, so the result does not
-    depend on it); progress: tqdm bar over the batches.
+    depend on it); progress: tqdm bar over the batches; tick: optional ``tick(n)`` called as
+    Adam steps are done (for a caller's progress bar; ``levels × iterations`` in all, fewer
+    when a level is too small to fit).
     Returns float32 ``(N, 2, H, W)`` shift fields ``(dy, dx)`` in pixels such that
     ``moving(y + dy, x + dx) ≈ reference(y, x)`` (see :func:`warp`). Pixels whose sample falls
     outside the moving image do not count in the loss.
@@ -220,7 +222,7 @@ def register_nonrigid_batch(movings: np.ndarray, reference: np.ndarray,
             out.append(register_nonrigid_batch(
                 movings[sl], part(reference, sl), grid=grid, iterations=iterations, lr=lr,
                 mask=part(mask, sl), levels=levels, device=device, init=part(init, sl),
-                normalise=normalise, batch_size=batch_size))
+                normalise=normalise, batch_size=batch_size, tick=tick))
         return np.concatenate(out)
     dev = resolve_device(device)
     mov = torch.as_tensor(np.array(movings, dtype=np.float32), device=dev)[:, None]
@@ -247,13 +249,13 @@ def register_nonrigid_batch(movings: np.ndarray, reference: np.ndarray,
         f = 2 ** level
         if min(h, w) // f < 8:
             continue
-        control = _fit_level(mov, ref, msk, control, f, iterations, lr, normalise)
+        control = _fit_level(mov, ref, msk, control, f, iterations, lr, normalise, tick)
     with torch.no_grad():
         out = dense_field(control, (h, w))
     return to_numpy(out).astype(np.float32)
 
 
-def _fit_level(mov, ref, msk, control, f, iterations, lr, normalise):
+def _fit_level(mov, ref, msk, control, f, iterations, lr, normalise, tick=None):
     """Adam on the L2 loss at pyramid level ``f`` (average pooling by f); control in full-res px."""
     if f > 1:
         mov_l, ref_l = F.avg_pool2d(mov, f), F.avg_pool2d(ref, f)
@@ -269,7 +271,9 @@ def _fit_level(mov, ref, msk, control, f, iterations, lr, normalise):
     control = control.detach().clone().requires_grad_(True)
     opt = torch.optim.Adam([control], lr=lr)
     sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, T_max=iterations, eta_min=lr * 0.02)
-    for _ in range(iterations):
+    for k in range(iterations):
+        if tick is not None and k % 10 == 9:
+            tick(10)
         opt.zero_grad(set_to_none=True)
         field = dense_field(control, (hl, wl)) / f
         warped, valid = _sample(mov_l, field, coef=coef)

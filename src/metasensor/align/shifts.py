@@ -27,20 +27,14 @@ __all__ = ["fourier_shift", "measure_shifts", "measure_shifts_torch", "shift_pre
 
 def tukey2d(shape: tuple[int, int], alpha: float = 0.25, device=None,
             dtype=torch.float32) -> torch.Tensor:
-    """Separable Tukey window: flat centre, raised-cosine edges of ``alpha/2`` of each side."""
+    """Separable Tukey window: flat centre, raised-cosine edges of ``alpha/2`` of each side,
+    sampled at the pixel centres ``(i + 0.5) / n`` (``scipy.signal.windows.tukey`` of
+    ``2n + 1`` points, every other one)."""
+    from scipy.signal.windows import tukey
 
-    def tukey(n: int) -> torch.Tensor:
-        x = (torch.arange(n, dtype=torch.float64, device="cpu") + 0.5) / n
-        w = torch.ones(n, dtype=torch.float64, device="cpu")
-        if alpha > 0:
-            edge = alpha / 2.0
-            lo, hi = x < edge, x > 1.0 - edge
-            w[lo] = 0.5 - 0.5 * torch.cos(math.pi * x[lo] / edge)
-            w[hi] = 0.5 - 0.5 * torch.cos(math.pi * (1.0 - x[hi]) / edge)
-        return w
-
-    win = tukey(shape[0])[:, None] * tukey(shape[1])[None, :]
-    return win.to(device=device, dtype=dtype)
+    rows, cols = (torch.from_numpy(tukey(2 * int(n) + 1, alpha)[1::2].copy())
+                  for n in shape)
+    return (rows[:, None] * cols[None, :]).to(device=device, dtype=dtype)
 
 
 def fourier_shift(x: torch.Tensor, shifts: torch.Tensor) -> torch.Tensor:

@@ -322,6 +322,8 @@ def run_dao(block_views, cfg: SystemConfig, method: str = "wave", init=None, dev
         estimates.append(phi.copy())
         if method == "geometric":
             total = total + np.where(used[..., None], np.nan_to_num(s_full) - fit.tilt, 0.0)
+        bar.set_postfix_str(f"update {history[-1]:.3f} λ, wavefront "
+                            f"{zernike_rms(phi, modes):.3f} λ r.m.s.", refresh=False)
         bar.update(1)
         if history[-1] < tol:
             break

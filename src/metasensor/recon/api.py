@@ -178,6 +178,24 @@ def _window(views, block: Block, d: int) -> np.ndarray:
     return np.asarray(views[:, :, sy, sx], dtype=np.float32)
 
 
+def _report_dao(index, zernike: np.ndarray, history: list[float], tol: float) -> None:
+    """One line per block under the progress bar: the wavefront DAO estimated (waves r.m.s.
+    over Noll 4-45) and how it converged."""
+    import sys
+
+    from tqdm import tqdm
+
+    from metasensor.dao.wavefront import zernike_rms
+
+    rms = zernike_rms(zernike)
+    last = history[-1] if history else 0.0
+    note = ("negligible: no further update" if len(history) == 1 and last < tol
+            else "converged" if last < tol else "not converged")
+    tqdm.write(f"block {tuple(int(i) for i in index)}: wavefront {rms:.3f} λ r.m.s. (Noll "
+               f"4-45), {len(history)} DAO update(s), last {last:.3f} λ: {note}",
+               file=sys.stderr)
+
+
 def reconstruct_block(task: BlockTask) -> BlockResult:
     """ISA (after DAO for wave/geometric) of one block; returns the block's region image."""
     import torch
@@ -199,21 +217,24 @@ def reconstruct_block(task: BlockTask) -> BlockResult:
 
         dao = importlib.import_module("metasensor.dao.estimate")  # lazily: the DAO stage's module
         init = zernike if np.any(zernike) else None
+        shown = task.progress is not None  # a local run with a bar: show DAO's updates too
+        dao_kwargs = {"progress": shown, **task.dao_kwargs}
         geometric_bank = (task.method == "geometric" and bank is None and task.psf_fn is None
                           and hasattr(dao, "run_dao") and hasattr(dao, "block_psfs"))
         if geometric_bank:  # ideal PSFs translated by the measured shifts (never reshaped)
             res = dao.run_dao(window, cfg, method="geometric", init=init, device=task.device,
-                              **task.dao_kwargs)
+                              **dao_kwargs)
             z_est, dao_history = res.zernike, res.history
             bank = dao.block_psfs(cfg, res, device=task.device)
         else:
             z_est, dao_history = dao.estimate_block_aberration(
-                window, cfg, method=task.method, init=init, device=task.device,
-                **task.dao_kwargs)
+                window, cfg, method=task.method, init=init, device=task.device, **dao_kwargs)
         z_est = np.asarray(z_est, dtype=np.float32).ravel()
         zernike = np.zeros(max(zernike.size, z_est.size), np.float32)
         zernike[:z_est.size] = z_est
         dao_history = [float(h) for h in dao_history]
+        if shown:
+            _report_dao(task.block.index, zernike, dao_history, dao_kwargs.get("tol", 0.1))
     if bank is None and task.psf_fn is None and task.method == "wave":
         # the window of the views used, from the estimate's ray reach (dao.estimate.psf_window;
         # 2-3x smaller than view_psfs' all-views default, >= 99.4 % of the used views' light)
