@@ -72,7 +72,7 @@ def _iteration(cfg, bank, size: int, dev, rng, estimator: str = "views") -> dict
     from scipy.ndimage import gaussian_filter
 
     from metasensor.dao.block import DaoBlock
-    from metasensor.solvers.krishnan_fergus import beta_schedule
+    from metasensor.solvers.splitting import beta_schedule
 
     d = cfg.scan_step_px
     h = size // d
@@ -131,7 +131,7 @@ def _accuracy(cfg, z, windows) -> list[dict]:
 def run(quick: bool = False) -> list[dict]:
     import metasensor as ms
     from metasensor.backend import resolve_device
-    from metasensor.dao.estimate import psf_window
+    from metasensor.dao.banks import psf_window
     from metasensor.optics.zernike import random_zernike
 
     cfg = ms.SystemConfig()

@@ -59,7 +59,7 @@ def sim_bank(cfg, zernike=None, depth=0.0, phase=None, device=None):
     """The simulator's fine bank (``view_psfs(subsample=3) · 9``, as its default) on a window
     ``SIM_EXTRA`` px per side wider than the reconstructions' :func:`psf_window`."""
     import metasensor as ms
-    from metasensor.dao.estimate import psf_window
+    from metasensor.dao.banks import psf_window
 
     size = min(psf_window(cfg, zernike) + 2 * SIM_EXTRA, SIM_MAX)
     kw = {} if phase is None else {"phase": phase, "cache": False}
@@ -113,7 +113,8 @@ def one_case(scene_name: str, rms: float, draw: int, size: int, max_iter: int,
     """One capture (``snr_db``, aberration ``rms`` draw ``draw``, ``size`` px) and its rows: 2D
     sensor, hardware AO, the oracle ISA and DAO by each of ``methods``."""
     import metasensor as ms
-    from metasensor.dao.estimate import block_psfs, psf_window, run_dao
+    from metasensor.dao.banks import block_psfs, psf_window
+    from metasensor.dao.estimate import run_dao
     from metasensor.dao.wavefront import zernike_rms
     from metasensor.metrics import psnr, ssim
     from metasensor.optics.zernike import random_zernike

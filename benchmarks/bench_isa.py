@@ -48,7 +48,7 @@ def psf_bank(cfg):
 def _problem(lenslets: int, device):
     from metasensor.config import SystemConfig
     from metasensor.phasespace.operator import PhaseSpaceOperator, make_geometry
-    from metasensor.solvers.richardson_lucy import view_order
+    from metasensor.phasespace.views import view_order
 
     cfg = SystemConfig()
     bank, source = psf_bank(cfg)
@@ -118,14 +118,14 @@ def _fft_times(op, n_subsets: int, iterations: int) -> tuple[float, float]:
 
 
 def _speed_rows(lenslets: int, iterations: int, variants, device) -> list[dict]:
-    from metasensor.solvers.richardson_lucy import richardson_lucy
+    from metasensor.solvers.richardson_lucy import RLOptions, richardson_lucy
 
     op, data, mask, otf_s, source, _ = _problem(lenslets, device)
     rows = []
     for subsets in variants:
         _sync(op.device)
         t0 = time.perf_counter()
-        richardson_lucy(op, data, mask, iterations=iterations, subsets=subsets)
+        richardson_lucy(op, data, mask, RLOptions(iterations=iterations, subsets=subsets))
         _sync(op.device)
         wall = time.perf_counter() - t0
         own, conv = _fft_times(op, subsets, iterations)
@@ -149,7 +149,7 @@ def _hqs_row(lenslets: int, device) -> dict:
     from metasensor.phasespace.masked_normal import BandNormal
     from metasensor.phasespace.normal import FoldedNormal
     from metasensor.solvers import hqs
-    from metasensor.solvers.richardson_lucy import richardson_lucy
+    from metasensor.solvers.richardson_lucy import RLOptions, richardson_lucy
 
     op, data, mask, _, source, psf = _problem(lenslets, device)
     counts = {"forward": 0, "adjoint": 0, "solve": 0, "apply": 0, "band_normal": 0}
@@ -172,7 +172,7 @@ def _hqs_row(lenslets: int, device) -> dict:
     try:
         _sync(op.device)
         t0 = time.perf_counter()
-        hqs.hyper_laplacian_isa(op, psf, data, mask, noise=1e-3 * float(data.std()))
+        hqs.hqs(op, data, mask, hqs.HQSOptions(noise=1e-3 * float(data.std())))
         _sync(op.device)
         wall = time.perf_counter() - t0
     finally:
@@ -180,7 +180,7 @@ def _hqs_row(lenslets: int, device) -> dict:
         BandNormal.__call__ = orig["band_normal"]
         op.forward, op.adjoint = orig["forward"], orig["adjoint"]
     t0 = time.perf_counter()
-    richardson_lucy(op, data, mask, iterations=5, subsets=16)
+    richardson_lucy(op, data, mask, RLOptions(iterations=5, subsets=16))
     _sync(op.device)
     rl_wall = time.perf_counter() - t0
     pair, _ = _fft_times(op, 1, 1)
@@ -209,9 +209,10 @@ def _quality_rows(iterations: int) -> list[dict]:
 
     import metasensor as ms
     from metasensor.phasespace.operator import PhaseSpaceOperator, make_geometry
+    from metasensor.phasespace.views import subset_major, view_order
     from metasensor.simulation.capture import simulate
     from metasensor.simulation.scenes import natural_image, resolution_chart
-    from metasensor.solvers.richardson_lucy import richardson_lucy, subset_major, view_order
+    from metasensor.solvers.richardson_lucy import RLOptions, richardson_lucy
 
     spec = importlib.util.spec_from_file_location("bsp", HERE / "bench_scan_period.py")
     bsp = importlib.util.module_from_spec(spec)
@@ -241,7 +242,7 @@ def _quality_rows(iterations: int) -> list[dict]:
             elapsed = 0.0
             for _ in range(iterations):
                 t1 = time.perf_counter()
-                est = richardson_lucy(op, data, mask, iterations=1, subsets=subsets,
+                est = richardson_lucy(op, data, mask, RLOptions(iterations=1, subsets=subsets),
                                       init=est).estimate
                 elapsed += time.perf_counter() - t1
                 img = g.crop(est).cpu().numpy()

@@ -41,7 +41,7 @@ def _spectrum_rows(quick: bool) -> list[dict]:
         d = cfg.scan_step_px
         side = max(4, -(-psf.shape[-1] // d))
         g = make_geometry((side * 2, side * 2), d, psf.shape[-1] // 2, pad=False)
-        nm = FoldedNormal(PhaseSpaceOperator(psf, g, device="cpu"), psf)
+        nm = FoldedNormal(PhaseSpaceOperator(psf, g, device="cpu"))
         ev = nm.eigenvalues()
         ev = (ev / ev.max()).numpy()
         rows.append({"study": "spectrum", "scan": scan, "aliases": d * d, "views": len(psf),
@@ -68,17 +68,18 @@ def _quality_rows(quick: bool) -> list[dict]:
     from skimage.metrics import structural_similarity
 
     import metasensor as ms
-    from metasensor.phasespace.normal import FoldedNormal, tikhonov
+    from metasensor.phasespace.normal import FoldedNormal
     from metasensor.phasespace.operator import PhaseSpaceOperator, make_geometry
     from metasensor.simulation.scenes import natural_image, resolution_chart
     from metasensor.solvers.richardson_lucy import richardson_lucy
+    from metasensor.solvers.tikhonov import tikhonov
 
     cfg = ms.SystemConfig()
     psf = np.asarray(ms.view_psfs(cfg), np.float32)[cfg.view_mask()]
     side = 40 if quick else 60
     g = make_geometry((side, side), cfg.scan_step_px, psf.shape[-1] // 2, pad=False)
     op = PhaseSpaceOperator(psf, g, device="cpu")
-    nm = FoldedNormal(op, psf)
+    nm = FoldedNormal(op)
     n = side * cfg.scan_step_px
     scenes = {"chart": resolution_chart(n), "camera": natural_image("camera", n)}
     full = torch.ones(g.grid, dtype=torch.bool)

@@ -13,8 +13,10 @@ def test_reconstruct_with_dao_reports_each_blocks_wavefront(capsys):
     z[3] = 0.3  # 0.3 waves of defocus
     cap = ms.simulate(load_scene("chart", 60), ms.SystemConfig(), zernike=z, snr_db=40, seed=0,
                       comparison=False)
+    from metasensor.dao.estimate import DaoOptions
+
     ms.reconstruct(cap.views, cap.config, method="wave", blocks=(1, 1), progress=True,
-                   dao_kwargs={"max_iter": 2})
+                   dao=DaoOptions(max_iter=2))
     err = capsys.readouterr().err
     assert "DAO (wave)" in err and "λ r.m.s." in err
     line = next(ln for ln in err.replace("\r", "\n").splitlines() if ln.startswith("block (0, 0)"))

@@ -6,14 +6,9 @@ import torch
 
 import metasensor as ms
 from metasensor.config import SystemConfig
+from metasensor.dao.banks import block_psfs, geometric_psfs
 from metasensor.dao.block import DaoBlock
-from metasensor.dao.estimate import (
-    DaoResult,
-    block_psfs,
-    estimate_block_aberration,
-    geometric_psfs,
-    run_dao,
-)
+from metasensor.dao.estimate import DaoResult, estimate_block_aberration, run_dao
 from metasensor.dao.wavefront import zernike_rms
 from metasensor.optics.zernike import random_zernike
 
@@ -140,7 +135,7 @@ def test_wave_dao_three_waves():
     # Measured before the shift measurement's known-region weights: 1.407, 0.818, 0.281, 0.184 λ
     # after updates 1-4 (240-px block, rays reach ~106 px); passes with them and with the
     # precision-weighted fit too
-    from metasensor.dao.estimate import psf_window
+    from metasensor.dao.banks import psf_window
 
     z = random_zernike(3.0, seed=3)
     k = psf_window(CFG, z) + 80
@@ -188,7 +183,7 @@ def test_ray_reach_tilt_and_defocus_analytic():
     # defocus Noll 4 (√3(2r²−1)) has |∇W| = 4√3·c·r, largest at the used footprints' outer edge:
     # r between the outermost used view centre (6 views / pupil_radius_px) and its footprint
     # corner (+0.5·√2 view), never beyond the pupil (r ≤ 1)
-    from metasensor.dao.estimate import psf_window, ray_reach_px
+    from metasensor.dao.banks import psf_window, ray_reach_px
     from metasensor.dao.wavefront import shift_scale
 
     k = shift_scale(CFG)
@@ -215,7 +210,7 @@ def test_psf_window_keeps_the_used_views_light():
     # of the used views' light of view_psfs' default 99.5 %-of-all-views window at 1 λ
     # (measured 99.48 % and 99.69 % for K = 151 and 177 against 413 and 341), and is at most
     # 0.55× as wide (measured 0.37 and 0.52)
-    from metasensor.dao.estimate import psf_window
+    from metasensor.dao.banks import psf_window
 
     used = CFG.view_mask()
     for seed in (0, 1):
@@ -252,8 +247,9 @@ def test_block_memory_lean_path_matches_cached(rng):
 
 def test_block_inside_fractions(rng):
     # the fraction of a view's predicted light from inside the block, for a kernel displaced by
-    # (0, +6) px: samples (1_block ⊛ H) in the left 6 columns draw from outside (0), the rest
-    # from inside (1). Exact to float32 rounding (1e-5).
+    # (0, +6) px: the samples (A·1_block, every 3rd pixel from pixel 1) in the left 6 columns
+    # (samples 0, 1) draw from outside (0), the rest from inside (1). Exact to float32
+    # rounding (1e-5).
     k = 21
     bank = np.zeros((15, 15, k, k), np.float32)
     bank[..., k // 2, k // 2 + 6] = 1.0
@@ -261,11 +257,38 @@ def test_block_inside_fractions(rng):
     views = torch.tensor(rng.random((int(used.sum()), 16, 16)), dtype=torch.float32)
     blk = DaoBlock(views, CFG, used, 5e4, 8)
     blk.set_psfs(bank)
-    pred = blk._inside(slice(0, 3))[0].numpy()
-    assert pred.shape == (48, 48)
-    assert np.abs(pred[:, :6]).max() < 1e-5 and np.abs(pred[:, 6:] - 1).max() < 1e-5
+    frac = blk.inside_fraction().numpy()
+    assert frac.shape == (int(used.sum()), 16, 16)
+    assert np.abs(frac[..., :2]).max() < 1e-5 and np.abs(frac[..., 2:] - 1).max() < 1e-5
     assert float(blk.reliability(torch.tensor(0.5))) == 0.0
     assert float(blk.reliability(torch.tensor(1.0))) == 1.0
+
+
+def test_block_prediction_is_the_operators_forward(rng):
+    # DAO measures its shifts against the reconstruction's operator: DaoBlock.predict of an
+    # image equals PhaseSpaceOperator.forward of the same bank on the same image in the padded
+    # domain (the image placed by DaoBlock.embed), sample for sample (float32: 1e-6 of the peak)
+    from metasensor.phasespace.operator import PhaseSpaceOperator, make_geometry
+
+    k = 15
+    bank = np.zeros((15, 15, k, k), np.float32)
+    bank[..., 4:11, 4:11] = rng.random((15, 15, 7, 7)).astype(np.float32)
+    used = CFG.view_mask()
+    views = torch.tensor(rng.random((int(used.sum()), 18, 20)), dtype=torch.float32)
+    blk = DaoBlock(views, CFG, used, 5e4, 8)
+    blk.set_psfs(bank)
+    image = torch.tensor(rng.random((54, 60)), dtype=torch.float32)
+    psf = bank[used][:, 4:11, 4:11]  # the bank's light (DaoBlock crops to it)
+    g = make_geometry((18, 20), 3, 3, pad=True)
+    op = PhaseSpaceOperator(psf, g, device="cpu")
+    sy, sx = g.sample_slices()
+    ref = op.forward(blk.embed(image))[:, sy, sx]
+    mine = blk.predict(image)
+    assert mine.shape == ref.shape == (int(used.sum()), 18, 20)
+    assert float((mine - ref).abs().max()) <= 1e-6 * float(ref.abs().max())
+    # and the placed image is the image on the window's pixels
+    oy, ox = blk.op.geometry.offset
+    assert torch.allclose(blk.embed(image)[oy:oy + 54, ox:ox + 60], image, rtol=0, atol=1e-6)
 
 
 def test_block_isa_estimate_is_the_blocks_reconstruction(rng):

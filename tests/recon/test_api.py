@@ -1,8 +1,5 @@
 """``reconstruct`` on stand-in PSFs: contract shapes, flux, seamless blocks, DAO hook, errors."""
 
-import sys
-import types
-
 import numpy as np
 import pytest
 
@@ -86,17 +83,22 @@ def test_solver_selection_and_hqs_contract(capture, bank):
 
 
 def test_dao_methods_use_estimated_aberration(capture, bank, monkeypatch):
+    # wave DAO per block: the block's window and DAO's settings go to run_dao; the estimated
+    # Noll vector reaches the block's bank (psf_fn) and the result; the DAO history is kept
+    from metasensor.dao import estimate
+    from metasensor.dao.estimate import DaoOptions, DaoResult
+
     views, _ = capture
     calls = []
 
-    def estimate_block_aberration(block_views, cfg, method, init=None, device=None, **kw):
-        calls.append((block_views.shape, method, init, kw))
+    def run_dao(block_views, cfg, options, init=None, device=None):
+        calls.append((block_views.shape, options, init))
         z = np.zeros(45)
         z[4] = 0.1 * len(calls)
-        return z, [1.0, 0.5]
+        return DaoResult(zernike=z, history=[1.0, 0.5], shifts=np.zeros((15, 15, 2)),
+                         method=options.method)
 
-    monkeypatch.setitem(sys.modules, "metasensor.dao.estimate",
-                        types.SimpleNamespace(estimate_block_aberration=estimate_block_aberration))
+    monkeypatch.setattr(estimate, "run_dao", run_dao)
     used = []
 
     def psf_fn(cfg, zernike, device):
@@ -104,8 +106,8 @@ def test_dao_methods_use_estimated_aberration(capture, bank, monkeypatch):
         return bank
 
     rec = reconstruct(views, CFG, method="wave", iterations=1, blocks=(1, 2), psf_fn=psf_fn,
-                      dao_kwargs={"rounds": 2}, scheduler="sync")
-    assert len(calls) == 2 and calls[0][1] == "wave" and calls[0][3] == {"rounds": 2}
+                      dao=DaoOptions(max_iter=2), scheduler="sync")
+    assert len(calls) == 2 and calls[0][1].method == "wave" and calls[0][1].max_iter == 2
     assert calls[0][0][:2] == (15, 15)
     np.testing.assert_allclose(sorted(rec.zernike[0, :, 4]), [0.1, 0.2], rtol=1e-6)
     assert sorted(round(float(u[4]), 3) for u in used) == [0.1, 0.2]
@@ -144,25 +146,42 @@ def test_bad_input(capture, bank):
 
 def test_wave_dao_bank_uses_the_used_views_window(capture, bank, monkeypatch):
     # After wave DAO (no psf / psf_fn given) the block's bank is generated at
-    # dao.estimate.psf_window of the estimate, not view_psfs' all-views default window.
-    import metasensor.recon.api as api
-    from metasensor.dao import estimate as real_dao
+    # dao.banks.psf_window of the estimate, not view_psfs' all-views default window.
+    from metasensor.dao import banks, estimate
+    from metasensor.dao.estimate import DaoResult
 
     views, _ = capture
     z = np.zeros(45)
     z[4] = 0.5
 
-    def estimate_block_aberration(window, cfg, method, init, device, **kw):
-        return z, [1.0]
+    def run_dao(window, cfg, options, init=None, device=None):
+        return DaoResult(zernike=z, history=[1.0], shifts=np.zeros((15, 15, 2)), method="wave",
+                         psf_size=banks.psf_window(cfg, z, cfg.view_mask()))
 
-    monkeypatch.setitem(sys.modules, "metasensor.dao.estimate", types.SimpleNamespace(
-        estimate_block_aberration=estimate_block_aberration, psf_window=real_dao.psf_window))
+    monkeypatch.setattr(estimate, "run_dao", run_dao)
     sizes = []
 
-    def default_psfs(cfg, zernike, device, size=None):
+    def psf_bank(cfg, zernike, amplitude=None, device=None, size=None, cache=True):
         sizes.append(size)
         return bank
 
-    monkeypatch.setattr(api, "_default_psfs", default_psfs)
+    monkeypatch.setattr(banks, "psf_bank", psf_bank)
     reconstruct(views, CFG, method="wave", iterations=1, scheduler="sync")
-    assert sizes == [real_dao.psf_window(CFG, z)]
+    assert sizes == [banks.psf_window(CFG, z)]
+
+
+def test_options_object_and_keywords_agree(capture, bank):
+    # the settings are one frozen, validated ReconOptions; keywords name its fields
+    from metasensor.recon.options import ReconOptions
+
+    views, _ = capture
+    opts = ReconOptions(psf=bank, iterations=2, overlap=12)
+    a = reconstruct(views, CFG, options=opts).image
+    b = reconstruct(views, CFG, psf=bank, iterations=2, overlap=12).image
+    np.testing.assert_array_equal(a, b)
+    with pytest.raises(TypeError, match="unknown settings"):
+        reconstruct(views, CFG, psf=bank, iteration=2)
+    with pytest.raises(ValueError, match="order"):
+        ReconOptions(order="zigzag")
+    with pytest.raises(AttributeError):
+        opts.iterations = 3  # frozen

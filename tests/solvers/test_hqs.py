@@ -12,8 +12,10 @@ import torch
 import metasensor as ms
 from metasensor.phasespace.operator import PhaseSpaceOperator, make_geometry
 from metasensor.simulation.scenes import resolution_chart
-from metasensor.solvers.hqs import estimate_noise, hyper_laplacian_isa
+from metasensor.solvers.hqs import HQSOptions, estimate_noise, hqs
+from metasensor.solvers.priors import HyperLaplacian
 from metasensor.solvers.richardson_lucy import richardson_lucy
+from metasensor.solvers.splitting import Continuation
 from recon_standin import one_torch_thread  # noqa: F401
 
 S = 40  # view samples per side
@@ -64,7 +66,7 @@ def test_prior_beats_richardson_lucy_and_the_linear_limit(bank):
     # (1.75 x sigma on this dense chart, see above), RL 0.54.
     g, op, truth, _, y, _ = _problem(bank, False)
     full = torch.ones(g.grid, dtype=torch.bool)
-    x = hyper_laplacian_isa(op, bank, y, full).estimate
+    x = hqs(op, y, full).estimate
     rl = richardson_lucy(op, torch.clamp(y, min=0), full).estimate
     s_hqs, s_rl = _ssim(truth, x), _ssim(truth, rl)
     assert s_hqs >= 0.78 and s_hqs > s_rl + 0.2, (s_hqs, s_rl)
@@ -75,8 +77,8 @@ def test_prior_beats_richardson_lucy_and_the_linear_limit(bank):
 def test_noise_free_data_are_recovered(bank):
     # Noise-free model-exact data with a small stated noise: SSIM >= 0.98 (measured 0.99).
     g, op, truth, clean, _, sigma = _problem(bank, False)
-    x = hyper_laplacian_isa(op, bank, clean, torch.ones(g.grid, dtype=torch.bool),
-                            noise=sigma / 30).estimate
+    x = hqs(op, clean, torch.ones(g.grid, dtype=torch.bool),
+            HQSOptions(noise=sigma / 30)).estimate
     assert _ssim(truth, x) >= 0.98
 
 
@@ -89,8 +91,8 @@ def test_unobserved_margins_cost_little(bank):
     mask[g.sample_slices()] = True
     oy, ox = g.offset
     win = (slice(oy, oy + 3 * S), slice(ox, ox + 3 * S))
-    masked = hyper_laplacian_isa(op, bank, y * mask, mask, noise=sigma).estimate
-    full = hyper_laplacian_isa(op, bank, y, torch.ones_like(mask), noise=sigma).estimate
+    masked = hqs(op, y * mask, mask, HQSOptions(noise=sigma)).estimate
+    full = hqs(op, y, torch.ones_like(mask), HQSOptions(noise=sigma)).estimate
     s_m, s_f = _ssim(truth[win], masked[win]), _ssim(truth[win], full[win])
     assert s_m >= s_f - 0.02, (s_m, s_f)
 
@@ -99,15 +101,15 @@ def test_inputs_are_not_modified_and_bad_parameters_are_named(bank):
     g, op, _, _, y, _ = _problem(bank, False)
     full = torch.ones(g.grid, dtype=torch.bool)
     before = y.clone()
-    hyper_laplacian_isa(op, bank, y, full, beta_max=4.0)
+    hqs(op, y, full, HQSOptions(continuation=Continuation(beta_max=4.0)))
     assert torch.equal(y, before)
     with pytest.raises(ValueError, match="alpha"):
-        hyper_laplacian_isa(op, bank, y, full, alpha=0.5)
+        hqs(op, y, full, HQSOptions(prior=HyperLaplacian(alpha=0.5)))
     with pytest.raises(ValueError, match="lam"):
-        hyper_laplacian_isa(op, bank, y, full, lam=-1.0)
+        hqs(op, y, full, HQSOptions(lam=-1.0))
     with pytest.raises(ValueError, match="inner"):
-        hyper_laplacian_isa(op, bank, y, full, inner=0)
-    zero = hyper_laplacian_isa(op, bank, torch.zeros_like(y), full)
+        hqs(op, y, full, HQSOptions(inner=0))
+    zero = hqs(op, torch.zeros_like(y), full)
     assert not zero.estimate.any()
 
 
@@ -138,8 +140,8 @@ def test_model_error_bounds_the_data_weight(bank):
 
     samples, m = op.samples_and_mask(y, mask)
     unit = 2 * float(samples.sum()) / float(op.sensitivity(m.float()).sum())  # image mean 0.5
-    noise_only = hyper_laplacian_isa(op, bank, y, mask, lam=0.3 / (sigma / unit) ** 2).estimate
-    default = hyper_laplacian_isa(op, bank, y, mask).estimate
+    noise_only = hqs(op, y, mask, HQSOptions(lam=0.3 / (sigma / unit) ** 2)).estimate
+    default = hqs(op, y, mask).estimate
     rl = richardson_lucy(op, y, mask).estimate
     assert err(default) < err(rl) < 0.5
     assert err(noise_only) > 3.0

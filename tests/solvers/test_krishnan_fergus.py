@@ -10,12 +10,9 @@ from scipy.signal import fftconvolve
 from skimage import data, restoration
 from skimage.metrics import peak_signal_noise_ratio as psnr
 
-from metasensor.solvers.krishnan_fergus import (
-    beta_schedule,
-    hyper_laplacian_deconv,
-    solve_w,
-    solve_w_table,
-)
+from metasensor.solvers.hyper_laplacian import solve_w, solve_w_table
+from metasensor.solvers.krishnan_fergus import hyper_laplacian_deconv
+from metasensor.solvers.splitting import beta_schedule
 
 
 def _objective(w, v, beta, alpha=2 / 3):
@@ -64,7 +61,7 @@ def test_solve_w_alpha_one_is_soft_threshold():
 def test_solve_w_table_matches_closed_form(rng):
     # nearest point of a 2^14 table: |error| <= 2e-4 · max|v| except for elements within one
     # table step of the threshold (they may fall on either side of the jump)
-    from metasensor.solvers.krishnan_fergus import _threshold_two_thirds
+    from metasensor.solvers.hyper_laplacian import _threshold_two_thirds
 
     v = torch.tensor(rng.normal(0, 0.5, 20000))
     vmax = float(v.abs().max())
@@ -74,7 +71,7 @@ def test_solve_w_table_matches_closed_form(rng):
         near = (v.abs() - _threshold_two_thirds(beta)).abs() < 2 * vmax / (1 << 14)
         assert float((fast - exact).abs()[~near].max()) < 2e-4 * vmax
     # the threshold itself: minimiser 0 just below, non-zero just above
-    from metasensor.solvers.krishnan_fergus import _threshold_two_thirds
+    from metasensor.solvers.hyper_laplacian import _threshold_two_thirds
 
     vt = _threshold_two_thirds(8.0)
     w = solve_w(np.array([vt * (1 - 1e-6), vt * (1 + 1e-6)]), 8.0)

@@ -6,7 +6,8 @@ import torch
 
 from metasensor.config import SystemConfig
 from metasensor.phasespace.operator import PhaseSpaceOperator, make_geometry
-from metasensor.solvers.richardson_lucy import make_subsets, richardson_lucy, view_order
+from metasensor.phasespace.views import make_subsets, view_order
+from metasensor.solvers.richardson_lucy import RLOptions, richardson_lucy
 from recon_standin import gaussian_psfs, one_torch_thread, synth_views  # noqa: F401
 
 
@@ -32,7 +33,7 @@ def test_rl_flux_nonnegative_and_converging(rng, subsets):
     # Flux: the scene is dark near the border, so the field holds all its light: Σ estimate within
     # 1 % of Σ truth. Residual falls monotonically over the iterations (noise-free data).
     op, g, data, mask, truth = _problem(rng)
-    res = richardson_lucy(op, data, mask, iterations=6, subsets=subsets)
+    res = richardson_lucy(op, data, mask, RLOptions(iterations=6, subsets=subsets))
     est = g.crop(res.estimate).numpy()
     assert np.isfinite(est).all() and est.min() >= 0
     assert abs(est.sum() / truth.sum() - 1) < 0.01
@@ -46,9 +47,9 @@ def test_rl_noisy_negative_and_zero_data_stay_finite(rng):
     # Noise with negative samples, and an all-zero data set: no NaN/Inf, no negative values.
     op, g, data, mask, _ = _problem(rng, noise=0.2)
     assert float(data.min()) < 0
-    res = richardson_lucy(op, data, mask, iterations=3, subsets=5)
+    res = richardson_lucy(op, data, mask, RLOptions(iterations=3, subsets=5))
     assert torch.isfinite(res.estimate).all() and float(res.estimate.min()) >= 0
-    res0 = richardson_lucy(op, torch.zeros_like(data), mask, iterations=2, subsets=1)
+    res0 = richardson_lucy(op, torch.zeros_like(data), mask, RLOptions(iterations=2, subsets=1))
     assert torch.isfinite(res0.estimate).all() and float(res0.estimate.min()) >= 0
     assert float(g.crop(res0.estimate).abs().max()) < 1e-3
 
@@ -58,7 +59,7 @@ def test_rl_rejects_bad_shapes(rng):
     with pytest.raises(ValueError, match="data must have shape"):
         richardson_lucy(op, data[:3], mask)
     with pytest.raises(ValueError, match="iterations"):
-        richardson_lucy(op, data, mask, iterations=-1)
+        richardson_lucy(op, data, mask, RLOptions(iterations=-1))
 
 
 def test_view_orders():

@@ -14,13 +14,15 @@ so ``warp(moving, register_nonrigid(moving, reference)) ≈ reference``.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 import torch
 import torch.nn.functional as F
 
 from metasensor.backend import resolve_device, to_numpy
 
-__all__ = ["register_nonrigid", "register_nonrigid_batch", "warp", "dense_field"]
+__all__ = ["NonrigidOptions", "register_nonrigid", "register_nonrigid_batch", "warp", "dense_field"]
 
 
 def _check_images(arr, name: str, ndim: int) -> np.ndarray:
@@ -172,59 +174,42 @@ def _normalise(t: torch.Tensor, mask: torch.Tensor | None) -> torch.Tensor:
     return (t - mean) / std.clamp_min(1e-12)
 
 
-def register_nonrigid_batch(movings: np.ndarray, reference: np.ndarray,
-                            grid: tuple[int, int] = (15, 20), iterations: int = 200,
-                            lr: float = 0.05, mask: np.ndarray | None = None,
-                            levels: int = 3, device=None, init: np.ndarray | None = None,
-                            normalise: bool = True, batch_size: int = 16,
-                            progress: bool = False, tick=None) -> np.ndarray:
-    """Register many images to one reference (or to one reference each) at once.
+@dataclass(frozen=True)
+class NonrigidOptions:
+    """Settings of :func:`register_nonrigid_batch` (frozen, validated).
 
-    movings: ``(N, H, W)``; reference: ``(H, W)`` or ``(N, H, W)``; grid: ``(rows, cols)`` of
-    control points (the paper: 15 × 20 over the field of view; ``(1, 1)`` = rigid translation);
-    iterations: Adam steps per pyramid level; lr: Adam step size in pixels of the full-resolution
-    image; mask: optional ``(H, W)`` or ``(N, H, W)`` weights (> 0 where the loss counts);
-    levels: pyramid levels (factor 2 each, coarse to fine; 1 = single scale); init: optional
-    starting field ``(N, 2, H, W)`` or ``(N, 2, rows, cols)`` control values; batch_size:
-    images optimised together (memory bound; the images are independent, so the result does not
-    depend on it); progress: tqdm bar over the batches; tick: optional ``tick(n)`` called as
-    Adam steps are done (for a caller's progress bar; ``levels × iterations`` in all, fewer
-    when a level is too small to fit).
-    Returns float32 ``(N, 2, H, W)`` shift fields ``(dy, dx)`` in pixels such that
-    ``moving(y + dy, x + dx) ≈ reference(y, x)`` (see :func:`warp`). Pixels whose sample falls
-    outside the moving image do not count in the loss.
+    Attributes
+    ----------
+    grid : (int, int)
+        Control points ``(rows, cols)`` (the paper: 15 × 20 over the field; (1, 1): rigid).
+    iterations : int
+        Adam steps per pyramid level.
+    lr : float
+        Adam step size in pixels of the full-resolution image.
+    levels : int
+        Pyramid levels (factor 2 each, coarse to fine; 1 = single scale).
+    normalise : bool
+        Compare zero-mean, unit-variance images (per image, over the mask).
+    batch_size : int
+        Images optimised together (memory bound; the result does not depend on it).
     """
-    movings = _check_images(movings, "movings", 3)
-    reference = np.asarray(reference)
-    reference = _check_images(reference, "reference", reference.ndim if reference.ndim in (2, 3)
-                              else 2)
+
+    grid: tuple = (15, 20)
+    iterations: int = 200
+    lr: float = 0.05
+    levels: int = 3
+    normalise: bool = True
+    batch_size: int = 16
+
+    def __post_init__(self) -> None:
+        if self.iterations < 1 or self.lr <= 0 or self.levels < 1 or self.batch_size < 1:
+            raise ValueError("iterations, lr, levels and batch_size must be positive")
+        object.__setattr__(self, "grid", (int(self.grid[0]), int(self.grid[1])))
+
+
+def _batch_tensors(movings, reference, mask, init, grid, dev):
+    """Moving, reference and mask tensors (N or 1, 1, H, W) and the initial control field."""
     n, h, w = movings.shape
-    if reference.shape[-2:] != (h, w) or (reference.ndim == 3 and reference.shape[0] != n):
-        raise ValueError(
-            f"reference shape {reference.shape} does not match movings {movings.shape}")
-    gy, gx = int(grid[0]), int(grid[1])
-    if gy < 1 or gx < 1 or gy > h or gx > w:
-        raise ValueError(
-            f"grid must be (rows, cols) of control points within the image, got {grid}")
-    if iterations < 1 or lr <= 0 or levels < 1 or batch_size < 1:
-        raise ValueError("iterations, lr, levels and batch_size must be positive")
-    if n > batch_size:
-        from tqdm.auto import tqdm
-
-        def part(a, sl):
-            a = None if a is None else np.asarray(a)
-            return a[sl] if a is not None and a.ndim in (3, 4) and len(a) == n else a
-
-        out = []
-        starts = range(0, n, batch_size)
-        for i in tqdm(starts, desc="registration", unit="batch", disable=not progress):
-            sl = slice(i, i + batch_size)
-            out.append(register_nonrigid_batch(
-                movings[sl], part(reference, sl), grid=grid, iterations=iterations, lr=lr,
-                mask=part(mask, sl), levels=levels, device=device, init=part(init, sl),
-                normalise=normalise, batch_size=batch_size, tick=tick))
-        return np.concatenate(out)
-    dev = resolve_device(device)
     mov = torch.as_tensor(np.array(movings, dtype=np.float32), device=dev)[:, None]
     ref = torch.as_tensor(np.array(reference, dtype=np.float32), device=dev)
     ref = ref[None, None] if ref.ndim == 2 else ref[:, None]
@@ -236,6 +221,7 @@ def register_nonrigid_batch(movings: np.ndarray, reference: np.ndarray,
                 f"mask must be (H, W) or (N, H, W) matching {(h, w)}, got {mask.shape}")
         msk = torch.as_tensor(np.array(mask), device=dev)
         msk = msk[None, None] if msk.ndim == 2 else msk[:, None]
+    gy, gx = grid
     control = torch.zeros((n, 2, gy, gx), dtype=torch.float32, device=dev)
     if init is not None:
         init_t = torch.as_tensor(np.array(init, dtype=np.float32), device=dev)
@@ -244,25 +230,89 @@ def register_nonrigid_batch(movings: np.ndarray, reference: np.ndarray,
         if tuple(init_t.shape[-2:]) != (gy, gx):
             init_t = F.interpolate(init_t, size=(gy, gx), mode="bilinear", align_corners=True)
         control = init_t.clone()
+    return mov, ref, msk, control
+
+
+def register_nonrigid_batch(movings: np.ndarray, reference: np.ndarray,
+                            options: NonrigidOptions | None = None, *,
+                            mask: np.ndarray | None = None, init: np.ndarray | None = None,
+                            device=None, tick=None, **settings) -> np.ndarray:
+    """Register many images to one reference (or to one reference each) at once.
+
+    Parameters
+    ----------
+    movings : array_like
+        ``(N, H, W)``.
+    reference : array_like
+        ``(H, W)`` or ``(N, H, W)``.
+    options : NonrigidOptions, optional
+        ``settings`` (keywords named as its fields: ``grid``, ``iterations``, ``lr``, ...)
+        override it.
+    mask : array_like, optional
+        ``(H, W)`` or ``(N, H, W)`` weights (> 0 where the loss counts).
+    init : array_like, optional
+        Starting field ``(N, 2, H, W)`` or ``(N, 2, rows, cols)`` control values.
+    device : str, optional
+    tick : callable, optional
+        ``tick(n)`` called as Adam steps are done (for a caller's progress bar; 10 at a time,
+        ``levels × iterations`` in all, fewer when a level is too small to fit).
+
+    Returns
+    -------
+    numpy.ndarray
+        float32 ``(N, 2, H, W)`` shift fields ``(dy, dx)`` in pixels such that
+        ``moving(y + dy, x + dx) ≈ reference(y, x)`` (see :func:`warp`). Pixels whose sample
+        falls outside the moving image do not count in the loss.
+    """
+    from dataclasses import replace
+
+    opts = replace(options or NonrigidOptions(), **settings)
+    movings = _check_images(movings, "movings", 3)
+    reference = np.asarray(reference)
+    reference = _check_images(reference, "reference", reference.ndim if reference.ndim in (2, 3)
+                              else 2)
+    n, h, w = movings.shape
+    if reference.shape[-2:] != (h, w) or (reference.ndim == 3 and reference.shape[0] != n):
+        raise ValueError(
+            f"reference shape {reference.shape} does not match movings {movings.shape}")
+    gy, gx = opts.grid
+    if gy < 1 or gx < 1 or gy > h or gx > w:
+        raise ValueError(
+            f"grid must be (rows, cols) of control points within the image, got {opts.grid}")
+    if n > opts.batch_size:
+        def part(a, sl):
+            a = None if a is None else np.asarray(a)
+            return a[sl] if a is not None and a.ndim in (3, 4) and len(a) == n else a
+
+        out = []
+        for i in range(0, n, opts.batch_size):
+            sl = slice(i, i + opts.batch_size)
+            out.append(register_nonrigid_batch(movings[sl], part(reference, sl), opts,
+                                               mask=part(mask, sl), init=part(init, sl),
+                                               device=device, tick=tick))
+        return np.concatenate(out)
+    mov, ref, msk, control = _batch_tensors(movings, reference, mask, init, (gy, gx),
+                                            resolve_device(device))
     control.requires_grad_(True)
-    for level in reversed(range(levels)):
+    for level in reversed(range(opts.levels)):
         f = 2 ** level
         if min(h, w) // f < 8:
             continue
-        control = _fit_level(mov, ref, msk, control, f, iterations, lr, normalise, tick)
+        control = _fit_level(mov, ref, msk, control, f, opts, tick)
     with torch.no_grad():
         out = dense_field(control, (h, w))
     return to_numpy(out).astype(np.float32)
 
 
-def _fit_level(mov, ref, msk, control, f, iterations, lr, normalise, tick=None):
+def _fit_level(mov, ref, msk, control, f, opts: NonrigidOptions, tick=None):
     """Adam on the L2 loss at pyramid level ``f`` (average pooling by f); control in full-res px."""
     if f > 1:
         mov_l, ref_l = F.avg_pool2d(mov, f), F.avg_pool2d(ref, f)
         msk_l = F.avg_pool2d(msk, f) if msk is not None else None
     else:
         mov_l, ref_l, msk_l = mov, ref, msk
-    if normalise:
+    iterations, lr = opts.iterations, opts.lr
+    if opts.normalise:
         mov_l, ref_l = _normalise(mov_l, msk_l), _normalise(ref_l, msk_l)
     hl, wl = mov_l.shape[-2:]
     coef = bspline_coefficients(mov_l)
@@ -286,21 +336,19 @@ def _fit_level(mov, ref, msk, control, f, iterations, lr, normalise, tick=None):
     return control.detach()
 
 
-def register_nonrigid(moving: np.ndarray, reference: np.ndarray, grid: tuple[int, int] = (15, 20),
-                      iterations: int = 200, lr: float = 0.05, mask: np.ndarray | None = None,
-                      device=None, **kwargs) -> np.ndarray:
+def register_nonrigid(moving: np.ndarray, reference: np.ndarray,
+                      options: NonrigidOptions | None = None, *, mask: np.ndarray | None = None,
+                      init: np.ndarray | None = None, device=None, **settings) -> np.ndarray:
     """Register one image ``moving (H, W)`` to ``reference (H, W)``.
 
     Returns the float32 shift field ``(2, H, W)`` = ``(dy, dx)`` in pixels with
-    ``moving(y + dy, x + dx) ≈ reference(y, x)``. See :func:`register_nonrigid_batch` for the
-    parameters (``levels``, ``init``, ``normalise`` pass through).
+    ``moving(y + dy, x + dx) ≈ reference(y, x)``. Parameters as :func:`register_nonrigid_batch`
+    (``init``: ``(2, H, W)`` or ``(2, rows, cols)``).
     """
     moving = _check_images(moving, "moving", 2)
     reference = _check_images(reference, "reference", 2)
     if mask is not None and np.asarray(mask).ndim != 2:
         raise ValueError(f"mask must be (H, W), got {np.asarray(mask).shape}")
-    init = kwargs.pop("init", None)
-    if init is not None:
-        kwargs["init"] = np.asarray(init)[None]
-    return register_nonrigid_batch(moving[None], reference, grid=grid, iterations=iterations,
-                                   lr=lr, mask=mask, device=device, **kwargs)[0]
+    init = None if init is None else np.asarray(init)[None]
+    return register_nonrigid_batch(moving[None], reference, options, mask=mask, init=init,
+                                   device=device, **settings)[0]

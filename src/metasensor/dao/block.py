@@ -1,8 +1,12 @@
-"""One DAO block's data and its two steps: the deconvolved mean image and the view shifts.
+"""One DAO block's data and its two steps: the block's image estimate and the view shifts.
 
 Hand-written (the paper's Methods, "ISA with multisite DAO in wave optics"; the loop that drives
-it is :func:`metasensor.dao.estimate.run_dao`, whose docstring states the algorithm and the
-known-region weights added here).
+it is :func:`metasensor.dao.estimate.run_dao`). Predictions, the known-region fractions and the
+ISA estimate all use one :class:`~metasensor.phasespace.operator.PhaseSpaceOperator` of the
+block's bank (:attr:`DaoBlock.op`), the operator the reconstruction fits: the shifts are
+measured against the model the block is then solved with. An image on the window's pixel grid
+is placed in the operator's padded domain with a reflection that fades to its mean
+(:func:`metasensor.solvers.krishnan_fergus.pad_fade`).
 """
 
 from __future__ import annotations
@@ -13,7 +17,11 @@ import torch
 from metasensor.align.shifts import fourier_shift, measure_shifts_torch, shift_precision
 from metasensor.backend import as_tensor
 from metasensor.config import SystemConfig
-from metasensor.solvers.krishnan_fergus import beta_schedule, kf_deconv, pad_fade, psf2otf
+from metasensor.phasespace.operator import PhaseSpaceOperator, make_geometry
+from metasensor.phasespace.views import subset_major, view_order
+from metasensor.solvers.krishnan_fergus import kf_deconv, pad_fade, psf2otf
+from metasensor.solvers.richardson_lucy import RLOptions, richardson_lucy
+from metasensor.solvers.splitting import Continuation
 
 __all__ = ["DaoBlock"]
 
@@ -63,7 +71,7 @@ class DaoBlock:
         self.lam = lam
         self.chunk0 = max(int(chunk), 1)
         self.cache_bytes = int(cache_bytes)
-        self.betas = beta_schedule()
+        self.betas = Continuation().betas()
         self._up = None
 
     def _up_chunk(self, b: slice) -> torch.Tensor:
@@ -85,7 +93,7 @@ class DaoBlock:
         self.pad = k // 2 + 4
         hh, ww = self.hw
         self.shape = (hh + 2 * self.pad, ww + 2 * self.pad)
-        nv, grid = self.views.shape[0], self.shape[0] * self.shape[1]
+        nv, grid = self.views.shape[0], self.shape[0] * self.shape[1]  # the KF deconvolutions
         cached = nv * (hh * ww * 4 + grid * 4) <= self.cache_bytes  # views + half spectra
         self.chunk = max(1, min(self.chunk0, self.cache_bytes // (12 * 4 * grid)))
         if cached and self._up is None:
@@ -93,21 +101,53 @@ class DaoBlock:
         elif not cached:
             self._up = None
         self.otf = psf2otf(self.kernels, self.shape) if cached else None
-        dom = torch.zeros(self.shape, device=self.views.device, dtype=self.views.dtype)
-        dom[self.pad:self.pad + hh, self.pad:self.pad + ww] = 1.0
-        self.domain_spec = torch.fft.rfft2(dom)
-        d = self.d
-        self.sample_weight = torch.cat([  # (B, h, w), fixed while the PSFs are
-            self.reliability(self._inside(slice(a, a + self.chunk))[:, d // 2::d, d // 2::d])
-            for a in range(0, nv, self.chunk)])
+        self._build_operator(h)
+        self.sample_weight = self.reliability(self.inside_fraction())  # fixed with the PSFs
 
-    def _inside(self, b: slice) -> torch.Tensor:
-        """Fraction (chunk, H, W) of each view pixel's predicted light that comes from image
-        pixels inside the block (1_block ⊛ H; kernels have unit sum)."""
-        p = self.pad
-        hh, ww = self.hw
-        spec = self.domain_spec * self._otf_chunk(b)
-        return torch.fft.irfft2(spec, s=self.shape)[:, p:p + hh, p:p + ww].clamp(0.0, 1.0)
+    def _build_operator(self, h: torch.Tensor, subsets: int = 16) -> None:
+        """The phase-space operator of the bank ``h`` (B, ky, kx), padded to a square, its views
+        in the authors' spiral order, subset-major (``self.order``; ``self.inverse`` maps back
+        to this block's raster order of the used views)."""
+        raster = [(int(u), int(v)) for u, v in zip(*np.nonzero(self.used), strict=True)]
+        pos = {p: i for i, p in enumerate(raster)}
+        order = [pos[p] for p in subset_major(view_order(self.used, "spiral"), subsets)]
+        dev = self.views.device
+        self.order = torch.as_tensor(order, device=dev)
+        self.inverse = torch.argsort(self.order)
+        ky, kx = h.shape[-2:]  # both odd (centred crops), may differ: pad to a square
+        k = max(ky, kx)
+        psf = torch.nn.functional.pad(h, ((k - kx) // 2, (k - kx) // 2, (k - ky) // 2,
+                                          (k - ky) // 2))[self.order]
+        geometry = make_geometry(tuple(self.views.shape[-2:]), self.d, k // 2, pad=True)
+        self.op = PhaseSpaceOperator(psf, geometry, device=dev)
+
+    def embed(self, image: torch.Tensor) -> torch.Tensor:
+        """A window image ``(H, W)`` in the operator's padded domain ``(Ny, Nx)``: the image at
+        its place, continued by a reflection that fades to its mean (circularly)."""
+        g = self.op.geometry
+        (ny, nx), (oy, ox) = g.domain, g.offset
+        hh, ww = image.shape[-2:]
+        pad = max(ny - hh, nx - ww) // 2 + 1
+        ext = pad_fade(image[None].to(torch.float32), pad)[0]
+        dev = ext.device
+        iy = torch.remainder(torch.arange(ny, device=dev) - oy + pad, ext.shape[0])
+        ix = torch.remainder(torch.arange(nx, device=dev) - ox + pad, ext.shape[1])
+        return ext[iy][:, ix]
+
+    def _window_samples(self, samples: torch.Tensor) -> torch.Tensor:
+        """(B, My, Mx) operator samples → (B, h, w) of the window, in raster view order."""
+        sy, sx = self.op.geometry.sample_slices()
+        return samples[self.inverse][:, sy, sx]
+
+    def inside_fraction(self) -> torch.Tensor:
+        """Fraction ``(B, h, w)`` of each view sample's predicted light that comes from image
+        pixels inside the block (``A·1_block`` over the view's light)."""
+        g = self.op.geometry
+        (oy, ox), (hh, ww) = g.offset, g.pixels
+        inside = torch.zeros(g.domain, device=self.views.device)
+        inside[oy:oy + hh, ox:ox + ww] = 1.0
+        frac = self._window_samples(self.op.forward(inside)) / self.energy[:, None, None]
+        return frac.clamp(0.0, 1.0)
 
     def reliability(self, frac: torch.Tensor) -> torch.Tensor:
         """Weight from an inside fraction: 0 below ``self.known``, rising to 1 at 1 (squared
@@ -116,18 +156,11 @@ class DaoBlock:
         return ((frac - t) / (1.0 - t)).clamp(0.0, 1.0) ** 2
 
     def estimate(self, shifts_px: torch.Tensor) -> torch.Tensor:
-        """I = Σ_uv e_uv Deconv(V_uv(p + s_uv), Ĥ_uv) / Σ e_uv on the pixel grid (H, W).
-
-        Not weighted by the known region (unlike :meth:`measure`). Measured, with the plain
-        (unweighted) Zernike fit: weighting each view's estimate by the same reliability of its
-        field (1_block ⋆ H) brought 3 λ closer (ED Fig. 4, 6 draws: 0.26-0.68 λ, 4 of 6 ≤ 0.3 λ,
-        against 0.33-0.93 λ without) but failed at low SNR (1 λ, 10 dB: 0.28 λ against 0.15 λ;
-        target 0.2 λ); weighting by the fraction itself kept 0.15 λ at 10 dB but ended 3 λ
-        draw 1 at 0.33 / 0.81 λ. With the precision-weighted fit (``run_dao``'s default) the
-        reliability weighting gives 0.111 λ at 10 dB, and on the one 3 λ draw this estimator alone
-        misses (astronaut, draw 1: 0.306 λ) it ends at 0.255 λ but wanders 0.22-0.34 λ over updates
-        4-8; not adopted without the full ED Fig. 4 re-run. The paper's estimator
-        (``run_dao(estimator="views")``); the default is :meth:`estimate_isa`."""
+        """I = Σ_uv e_uv Deconv(V_uv(p + s_uv), Ĥ_uv) / Σ e_uv on the pixel grid (H, W): the
+        paper's estimate (``run_dao(estimator="views")``), each view up-sampled and deconvolved
+        by Krishnan–Fergus (:func:`~metasensor.solvers.krishnan_fergus.kf_deconv`, λ = ``lam``,
+        the authors' β schedule) after translating it by ``-shifts_px`` (B, 2) pixels; not
+        weighted by the known region (``docs/decisions.md``)."""
         p = self.pad
         hh, ww = self.hw
         acc = torch.zeros((hh, ww), device=self.views.device, dtype=self.views.dtype)
@@ -143,50 +176,21 @@ class DaoBlock:
         return (acc / self.energy.sum()).clamp(min=0)
 
     def estimate_isa(self, iterations: int = 5, subsets: int = 16) -> torch.Tensor:
-        """I = the block's ISA (phase-space Richardson–Lucy,
-        :func:`~metasensor.solvers.richardson_lucy.richardson_lucy`, the authors' spiral view
-        order) of all used views with the current PSFs, on the pixel grid (H, W) at the scale of
-        :meth:`estimate`.
-
-        Not in the paper, whose intermediate image is :meth:`estimate` (the mean of the views'
-        separate deconvolutions). The joint deconvolution resolves what no single view does, so
-        the predictions S_d(I ⊛ H_uv) carry the views' detail and the shifts measured against them
-        are less biased. Measured (240-px block, 3 λ, 30 dB, starting from the *true*
-        aberration): one update moved the estimate 0.035 / 0.059 λ r.m.s. away (astronaut /
-        camera, draw 1) against 0.172 / 0.181 λ with :meth:`estimate` (0.035 / 0.051 λ with the
-        sparse-gradient solver in place of RL: no better, 8x slower). Shifts are not applied:
-        ``run_dao`` measures once per update with it."""
-        from metasensor.phasespace.operator import PhaseSpaceOperator, make_geometry
-        from metasensor.solvers.richardson_lucy import richardson_lucy, subset_major, view_order
-
-        raster = [(int(u), int(v)) for u, v in zip(*np.nonzero(self.used), strict=True)]
-        pos = {p: i for i, p in enumerate(raster)}
-        order = [pos[p] for p in subset_major(view_order(self.used, "spiral"), subsets)]
-        idx = torch.as_tensor(order, device=self.views.device)
-        psf = (self.kernels * self.energy[:, None, None])[idx]
-        ky, kx = psf.shape[-2:]  # both odd (centred crops), may differ: pad to a square
-        k = max(ky, kx)
-        psf = torch.nn.functional.pad(psf, ((k - kx) // 2, (k - kx) // 2,
-                                            (k - ky) // 2, (k - ky) // 2))
-        h, w = self.views.shape[-2:]
-        geometry = make_geometry((h, w), self.d, psf.shape[-1] // 2, pad=True)
-        op = PhaseSpaceOperator(psf, geometry, device=self.views.device)
-        data, mask = geometry.embed(self.views[idx] / self.scale)
-        result = richardson_lucy(op, data, mask, iterations=iterations, subsets=subsets)
-        return geometry.crop(result.estimate).to(self.views.dtype)
+        """I = the block's ISA: phase-space Richardson–Lucy
+        (:func:`~metasensor.solvers.richardson_lucy.richardson_lucy`, the authors' spiral view
+        order) of all used views on :attr:`op`, on the window's pixel grid (H, W) at the scale
+        of :meth:`estimate`. Not in the paper (its intermediate image is :meth:`estimate`); no
+        shifts are applied (``run_dao`` measures once per update with it)."""
+        g = self.op.geometry
+        data, mask = g.embed(self.views[self.order] / self.scale)
+        options = RLOptions(iterations=iterations, subsets=subsets)
+        result = richardson_lucy(self.op, data, mask, options)
+        return g.crop(result.estimate).to(self.views.dtype)
 
     def predict(self, image: torch.Tensor) -> torch.Tensor:
-        """S_d(I ⊛ H_uv) for every used view → (B, h, w) (scan-step grid, view scale)."""
-        p, d = self.pad, self.d
-        hh, ww = image.shape
-        spec = torch.fft.rfft2(pad_fade(image[None], p))
-        out = []
-        for a in range(0, self.views.shape[0], self.chunk):
-            b = slice(a, a + self.chunk)
-            conv = torch.fft.irfft2(spec * self._otf_chunk(b), s=self.shape)[:, p:p + hh,
-                                                                               p:p + ww]
-            out.append(conv[:, d // 2::d, d // 2::d] * self.energy[b, None, None])
-        return torch.cat(out)
+        """The operator's prediction of every used view → (B, h, w) (scan-step grid, view scale)
+        of a window image ``(H, W)`` (:meth:`embed`)."""
+        return self._window_samples(self.op.forward(self.embed(image))).to(self.views.dtype)
 
     def measure(self, image: torch.Tensor, max_shift_px: float,
                 precision: bool = False) -> torch.Tensor | tuple[torch.Tensor, torch.Tensor]:

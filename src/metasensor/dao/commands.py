@@ -7,18 +7,9 @@ from pathlib import Path
 
 import typer
 
-__all__ = ["register", "parse_pair"]
+from metasensor.recon.blocks import parse_pair
 
-
-def parse_pair(text: str, name: str) -> tuple[int, int]:
-    """``"4x4"`` → (4, 4); a clear error naming the option otherwise."""
-    try:
-        a, b = (int(t) for t in text.lower().split("x"))
-    except ValueError:
-        raise ValueError(f"{name} must look like 4x4, got {text!r}") from None
-    if a < 1 or b < 1:
-        raise ValueError(f"{name} must be positive, got {text!r}")
-    return a, b
+__all__ = ["register"]
 
 
 def register(app: typer.Typer) -> None:

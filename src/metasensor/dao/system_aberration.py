@@ -24,7 +24,7 @@ import numpy as np
 
 from metasensor.config import ConfigError, SystemConfig
 
-__all__ = ["SystemAberration", "calibrate_system", "plot_wavefront_map", "plot_convergence"]
+__all__ = ["SystemAberration", "calibrate_system", "plot_wavefront_map"]
 
 FORMAT = "metasensor-system-aberration-1"
 
@@ -146,16 +146,65 @@ def _block_means(field: np.ndarray, blocks: tuple[int, int], core: float = 0.5) 
     return out
 
 
-def calibrate_system(views, cfg: SystemConfig, blocks: tuple[int, int] = (4, 4),
-                     grid: tuple[int, int] = (15, 20), iterations: int = 200,
-                     threshold: float = 0.5, view_mask=None, device=None,
-                     progress: bool = False) -> SystemAberration:
-    """Global calibration from the views ``(nnum, nnum, h, w)`` of a textured, in-focus target.
+def _view_fields(v: np.ndarray, cfg: SystemConfig, used: np.ndarray, reg, device,
+                 progress: bool) -> np.ndarray:
+    """Displacement fields ``(n, n, 2, h, w)`` (view pixels) of the used views against the
+    centre view (smooth non-rigid registration, 16 views at a time, the bar ticking every 10
+    Adam steps); zero elsewhere."""
+    from tqdm.auto import tqdm
 
-    blocks : (by, bx) blocks whose centres get a Noll vector; grid : control points (rows, cols)
-    of the per-view registration; iterations : Adam steps per pyramid level.
-    """
     from metasensor.align.nonrigid import register_nonrigid_batch
+
+    n, h, w = cfg.nnum, v.shape[2], v.shape[3]
+    c = cfg.center
+    gy, gx = reg.grid
+    uv = np.argwhere(used)
+    fields = np.zeros((n, n, 2, h, w), np.float32)
+    chunk = 16  # register_nonrigid_batch's own batch: the same computation, 16 views a tick
+    per_view = 1.0 / (reg.levels * reg.iterations)
+    with tqdm(total=len(uv), desc="registering views", unit="view",
+              disable=not progress) as bar:
+        for a in range(0, len(uv), chunk):
+            sel = uv[a:a + chunk]
+            end = a + len(sel)
+
+            def tick(k, m=len(sel), end=end):
+                bar.update(min(k * m * per_view, end - bar.n))
+
+            fields[sel[:, 0], sel[:, 1]] = register_nonrigid_batch(
+                v[sel[:, 0], sel[:, 1]], v[c, c], reg, grid=(min(gy, h), min(gx, w)),
+                device=device, tick=tick)
+            bar.update(end - bar.n)  # levels too small to fit are skipped
+    return fields
+
+
+def calibrate_system(views, cfg: SystemConfig, blocks: tuple[int, int] = (4, 4),
+                     threshold: float = 0.5, *, view_mask=None, device=None,
+                     progress: bool = False, **registration) -> SystemAberration:
+    """Global calibration from the views of a textured, in-focus target (module docstring).
+
+    Parameters
+    ----------
+    views : array_like
+        ``(nnum, nnum, h, w)`` view stack.
+    cfg : SystemConfig
+    blocks : (int, int)
+        Blocks ``(by, bx)`` whose centres get a Noll vector.
+    threshold : float
+        Pupil binarisation threshold in (0, 1) (:mod:`metasensor.dao.pupil`).
+    view_mask : array_like, optional
+        ``(nnum, nnum)`` views to register (default ``cfg.view_mask()``).
+    device : str, optional
+    progress : bool
+    **registration
+        :class:`metasensor.align.nonrigid.NonrigidOptions` fields of the per-view registration
+        (``grid`` control points, default 15 × 20; ``iterations`` Adam steps per level, 200).
+
+    Returns
+    -------
+    SystemAberration
+    """
+    from metasensor.align.nonrigid import NonrigidOptions
     from metasensor.dao.pupil import estimate_block_pupils
     from metasensor.dao.wavefront import fit_shifts, gradient_matrix
 
@@ -169,9 +218,10 @@ def calibrate_system(views, cfg: SystemConfig, blocks: tuple[int, int] = (4, 4),
     h, w = v.shape[2:]
     if by < 1 or bx < 1 or by > h or bx > w:
         raise ValueError(f"blocks must be positive and at most the view size, got {blocks}")
-    gy, gx = (int(g) for g in grid)
+    reg = NonrigidOptions(**registration)
+    gy, gx = reg.grid
     if gy < 1 or gx < 1:
-        raise ValueError(f"grid must be positive, got {grid}")
+        raise ValueError(f"grid must be positive, got {reg.grid}")
     d = cfg.scan_step_px
     matrix = gradient_matrix(cfg)
     used = cfg.view_mask() if view_mask is None else np.asarray(view_mask, bool)
@@ -180,23 +230,7 @@ def calibrate_system(views, cfg: SystemConfig, blocks: tuple[int, int] = (4, 4),
     lit = pupils.min(axis=(0, 1)) > 0
     used = used & lit
     c = cfg.center
-    uv = np.argwhere(used)
-    fields = np.zeros((n, n, 2, h, w), np.float32)
-    from tqdm.auto import tqdm
-
-    chunk = 16  # register_nonrigid_batch's own batch: the same computation, 16 views a tick
-    bar = tqdm(total=len(uv), desc="registering views", unit="view", disable=not progress)
-    per_view = 1.0 / (3 * iterations)  # its 3 pyramid levels of Adam steps
-    for a in range(0, len(uv), chunk):
-        sel = uv[a:a + chunk]
-        mov = v[sel[:, 0], sel[:, 1]]
-        out = register_nonrigid_batch(mov, v[c, c], grid=(min(gy, h), min(gx, w)),
-                                      iterations=iterations, device=device,
-                                      tick=lambda k, m=len(sel), end=a + len(sel): bar.update(
-                                          min(k * m * per_view, end - bar.n)))
-        fields[sel[:, 0], sel[:, 1]] = out
-        bar.update(a + len(sel) - bar.n)  # levels too small to fit are skipped
-    bar.close()
+    fields = _view_fields(v, cfg, used, reg, device, progress)
     # block averages of the measured shifts → image pixels → Zernike per block
     means = _block_means(fields, (by, bx)) * d  # (n, n, 2, by, bx)
     zern = np.zeros((by, bx, 45))
@@ -261,24 +295,3 @@ def plot_wavefront_map(sa: SystemAberration, path: str | Path, truth=None) -> Pa
     from metasensor.io.figures import save_figure
 
     return save_figure(fig, path, tight=False)
-
-
-def plot_convergence(histories: dict[str, list[float]], path: str | Path,
-                     tol: float = 0.1) -> Path:
-    """Convergence curves: r.m.s. of each DAO phase update (waves) per run, log scale."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(5, 3.5))
-    for name, hist in histories.items():
-        ax.semilogy(np.arange(1, len(hist) + 1), hist, "o-", label=name)
-    ax.axhline(tol, color="k", ls="--", lw=0.8, label=f"stop ({tol} λ)")
-    ax.set_xlabel("DAO update")
-    ax.set_ylabel("r.m.s. of the phase update (λ)")
-    ax.legend(fontsize=8)
-    ax.grid(alpha=0.3)
-    from metasensor.io.figures import save_figure
-
-    return save_figure(fig, path)

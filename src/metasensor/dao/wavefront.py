@@ -87,22 +87,40 @@ class ShiftFit:
 
 
 def fit_shifts(shifts, cfg: SystemConfig, mask=None, weights=None, modes=DAO_MODES,
-               jmax: int = 45, reject: float = 4.0, min_footprint: float = 0.5,
+               reject: float = 4.0, min_footprint: float = 0.5,
                matrix: tuple[np.ndarray, np.ndarray] | None = None) -> ShiftFit:
     """Least-squares Zernike coefficients from measured view shifts.
 
-    shifts : (nnum, nnum, 2) (y, x) image pixels of each view (relative to any common reference).
-    mask : (nnum, nnum) views to use (default ``cfg.view_mask()``); views whose footprint lies
+    Parameters
+    ----------
+    shifts : array_like
+        ``(nnum, nnum, 2)`` (y, x) image pixels of each view (relative to any common reference).
+    cfg : SystemConfig
+    mask : array_like, optional
+        ``(nnum, nnum)`` views to use (default ``cfg.view_mask()``); views whose footprint lies
         less than ``min_footprint`` inside the pupil are dropped.
-    weights : (nnum, nnum) non-negative per-view weights (default 1).
-    modes : Noll indices fitted (default 4–45); a common (y, x) shift is always fitted too.
-    reject : views whose residual exceeds ``reject`` × the robust (MAD) residual scale, and at
-        least 0.25 px, are dropped and the fit repeated (twice at most; 0 disables).
+    weights : array_like, optional
+        ``(nnum, nnum)`` non-negative per-view weights (default 1).
+    modes : iterable of int
+        Noll indices fitted (default 4–45); a common (y, x) shift is always fitted too.
+    reject : float
+        Views whose residual exceeds ``reject`` × the robust (MAD) residual scale, and at least
+        0.25 px, are dropped and the fit repeated (twice at most; 0 disables).
+    min_footprint : float
+        Smallest share of a view's footprint inside the pupil.
+    matrix : tuple, optional
+        :func:`gradient_matrix`'s result (its ``jmax`` sets the Noll vector's length; default
+        ``gradient_matrix(cfg, max(45, max(modes)))``).
+
+    Returns
+    -------
+    ShiftFit
     """
     s = np.asarray(shifts, dtype=np.float64)
     n = cfg.nnum
     if s.shape != (n, n, 2):
         raise ValueError(f"shifts must have shape ({n}, {n}, 2), got {s.shape}")
+    jmax = matrix[0].shape[-1] if matrix is not None else max(45, *(int(j) for j in modes))
     idx = _modes(modes, jmax)
     use = cfg.view_mask() if mask is None else np.asarray(mask, dtype=bool)
     if use.shape != (n, n):

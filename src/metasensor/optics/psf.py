@@ -31,7 +31,6 @@ its aperture)``, less the light outside the window.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -47,7 +46,7 @@ from metasensor.optics.coherent import (
     point_field,
     pupil_samples,
 )
-from metasensor.optics.pupil import disk_fraction, pupil_amplitude, pupil_phase
+from metasensor.optics.pupil import PupilFn, disk_fraction, pupil_amplitude, pupil_phase
 
 __all__ = ["view_psfs", "widefield_psf", "PSF_CODE_VERSION", "ENERGY_CUT"]
 
@@ -56,8 +55,6 @@ ENERGY_CUT = 0.005  # default windows keep >= 99.5 % of the energy
 # widefield fields above this many bytes (complex128) are formed by row-chunked MFT instead
 # (a 3-wave lens needs ~20,000² samples: 6 GB per array by FFT)
 WIDEFIELD_FFT_BYTES = 1 << 30
-
-PupilFn = Callable[[np.ndarray, np.ndarray], np.ndarray]
 
 
 # ----------------------------------------------------------------------------- checks

@@ -17,16 +17,10 @@ There a :class:`~metasensor.phasespace.operator.PhaseSpaceOperator` of the same 
 the band
 mask and Aᵀ, and the result is added back (index_add: the extraction's transpose).
 
-Cost: the band operators transform ``V`` views on the bands' area instead of the domain's. At a
-2,010² window (5 x 5 scan, 113 views, 45-px PSFs, 2,100² domain) the bands cover 10 % of the
-domain and one call takes 0.37 s (folded product 0.15 s, bands 0.22 s) against 3.1 s for
-``op.adjoint(op.forward(v) * mask)`` on 2 cores, equal to 3.6e-7 (relative); this made
-:func:`metasensor.solvers.hqs.hyper_laplacian_isa` 2.5x faster there (``benchmarks/bench_isa.py``
-``_hqs_row``; whole solve before / after: 300 px 7.0 / 6.4 s, 600 px 23.2 / 14.0 s, 1,005 px
-67.5 / 32.3 s, 2,010 px 383 / 153 s).
-Where the
-bands would cover more than :data:`MAX_BAND_FRACTION` of the domain (small windows) or the mask is
-not one rectangle, :func:`masked_normal` returns the direct product instead.
+Cost: the band operators transform ``V`` views on the bands' area instead of the domain's
+(``benchmarks/bench_isa.py``; figures in ``docs/decisions.md``). Where the bands would cover more
+than :data:`MAX_BAND_FRACTION` of the domain (small windows) or the mask is not one rectangle,
+:func:`masked_normal` returns the direct product instead.
 """
 
 from __future__ import annotations
@@ -40,8 +34,7 @@ from metasensor.phasespace.operator import Geometry, PhaseSpaceOperator, smooth_
 
 __all__ = ["BandNormal", "masked_normal", "MAX_BAND_FRACTION"]
 
-# bands beyond this share of the domain's area: the direct product is as fast (measured break-even
-# ~0.85: 113 views, 45-px PSFs, fraction 0.87 / 0.58 / 0.41: 1.04x / 0.82x / 0.53x its time)
+# bands beyond this share of the domain's area: the direct product is as fast (docs/decisions.md)
 MAX_BAND_FRACTION = 0.7
 
 
@@ -93,11 +86,11 @@ class BandNormal:
     """v -> AᵀMA v for a mask observing one rectangle: the folded circular AᵀA minus the two
     unobserved bands' AᵀA (module docstring). Holds the band operators; calls never change it."""
 
-    def __init__(self, op: PhaseSpaceOperator, normal: FoldedNormal, psf,
+    def __init__(self, op: PhaseSpaceOperator, normal: FoldedNormal,
                  rectangle: tuple[int, int, int, int]) -> None:
         if normal.op is not op:
             raise ValueError("normal must be the folded normal operator of op")
-        psf_t = torch.as_tensor(psf, dtype=torch.float32, device=op.device)
+        psf_t = op.psf
         my, mx = op.geometry.grid
         y0, y1, x0, x1 = rectangle
         self.normal = normal
@@ -119,7 +112,7 @@ class BandNormal:
         return out
 
 
-def masked_normal(op: PhaseSpaceOperator, normal: FoldedNormal, psf, mask: torch.Tensor,
+def masked_normal(op: PhaseSpaceOperator, normal: FoldedNormal, mask: torch.Tensor,
                   max_fraction: float = MAX_BAND_FRACTION):
     """A callable v -> AᵀMA v (``mask`` (My, Mx) bool, True where observed): the
     :class:`BandNormal` where the mask is one rectangle and its bands cover at most
@@ -135,5 +128,5 @@ def masked_normal(op: PhaseSpaceOperator, normal: FoldedNormal, psf, mask: torch
     rect = _observed_rectangle(m)
     if rect is None:
         return direct
-    band = BandNormal(op, normal, psf, rect)
+    band = BandNormal(op, normal, rect)
     return band if band.fraction <= max_fraction else direct

@@ -16,20 +16,17 @@ G(p, q) are the squared singular values of the whole scanning light-field measur
 what a capture can and cannot resolve (d² aliases against the number of views: a 1 x 1 scan,
 d = 15, has 225 unknowns per frequency for 113 views and a null space; 5 x 5 has 9).
 
-Circular (periodic) domain: :func:`tikhonov` handles unobserved samples (the padded margins of a
-window) by completing the data with the current prediction (an EM fixed point, a few outer steps).
+The regularised solves built on it are in :mod:`metasensor.solvers` (:mod:`~metasensor.solvers.
+tikhonov`, the x-step of :mod:`~metasensor.solvers.hqs`).
 """
 
 from __future__ import annotations
 
-import math
-
-import numpy as np
 import torch
 
 from metasensor.phasespace.operator import PhaseSpaceOperator
 
-__all__ = ["FoldedNormal", "tikhonov", "difference_weights"]
+__all__ = ["FoldedNormal"]
 
 
 class FoldedNormal:
@@ -38,16 +35,13 @@ class FoldedNormal:
     Memory: My·Mx·d⁴·8 bytes (2,100² px domain, d = 3: 290 MB). Calls never change the object.
     """
 
-    def __init__(self, op: PhaseSpaceOperator, psf) -> None:
+    def __init__(self, op: PhaseSpaceOperator) -> None:
         g = op.geometry
         self.op, self.geometry, self.device = op, g, op.device
         d = g.d
         my, mx = g.grid
         ny, nx = g.domain
-        psf_t = torch.as_tensor(np.asarray(psf, np.float32), device=self.device)
-        if tuple(psf_t.shape[:1]) != (op.n_views,) or psf_t.shape[-1] != op.k:
-            raise ValueError(f"psf must be the operator's bank {(op.n_views, op.k, op.k)}, "
-                             f"got {tuple(psf_t.shape)}")
+        psf_t = op.psf
         k, r = op.k, op.radius
         mat = torch.zeros((my, mx, d * d, d * d), dtype=torch.complex64, device=self.device)
         for i in range(0, op.n_views, op.chunk):
@@ -93,11 +87,9 @@ class FoldedNormal:
         R = diag(``weights``) (My, Mx, d²) in the folded layout (default: the identity); ``lam``
         is relative to G's largest diagonal. For :meth:`solve`.
 
-        Cholesky factorisation, then the explicit inverse: applying it is one batched d² x d²
-        product per solve, 3x faster than two triangular solves per frequency at 2,010² px
-        (0.15 s vs 0.45 s on 2 cores, equal to 5e-16). Double precision: G's eigenvalues span
-        ~1e-6..1 (float32 would lose the small ones); batched complex64 LU also hit an MKL
-        argument error for d = 15 (scan 1)."""
+        Cholesky factorisation, then the explicit inverse (applying it is one batched d² x d²
+        product per solve), in double precision: G's eigenvalues span ~1e-6..1 (float32 would
+        lose the small ones). Timings: ``docs/decisions.md``."""
         if not lam > 0:
             raise ValueError(f"lam must be > 0, got {lam}")
         scale = float(self.matrix.diagonal(dim1=-2, dim2=-1).real.max())
@@ -116,35 +108,3 @@ class FoldedNormal:
                                                      device=self.device)))
         x = torch.matmul(inverse, b.to(torch.complex128).unsqueeze(-1)).squeeze(-1)
         return torch.fft.ifft2(self.unfold(x.to(torch.complex64))).real
-
-
-def difference_weights(normal: FoldedNormal, floor: float = 1e-3) -> torch.Tensor:
-    """|D_y|² + |D_x|² (first differences, the discrete Laplacian's symbol) per alias, folded, plus
-    ``floor`` (keeps the mean determined): a smoothness regulariser R for :meth:`factor`."""
-    ny, nx = normal.geometry.domain
-    ky = torch.fft.fftfreq(ny, device=normal.device)[:, None]
-    kx = torch.fft.fftfreq(nx, device=normal.device)[None, :]
-    sym = 4 * torch.sin(math.pi * ky) ** 2 + 4 * torch.sin(math.pi * kx) ** 2 + floor
-    return normal.fold(sym.to(torch.complex64)).real
-
-
-def tikhonov(normal: FoldedNormal, data, mask, lam: float, smooth: bool = True,
-             outer: int = 10) -> torch.Tensor:
-    """Regularised least squares ``argmin ||A x − y||²_mask + lam·xᵀRx`` on the op's domain.
-
-    data : (V, My, Mx) view samples on the domain's sample grid; mask : (My, Mx) True where
-    observed. Unobserved samples are filled with the current prediction and the circular problem
-    re-solved ``outer`` times (exact in one step when everything is observed). R: first
-    differences (``smooth``) or the identity. Returns the (Ny, Nx) domain estimate (not clipped).
-    """
-    op = normal.op
-    y, m = op.samples_and_mask(data, mask)
-    inv = normal.factor(lam, difference_weights(normal) if smooth else None)  # once
-    mf = m.to(torch.float32)
-    y = torch.nan_to_num(y) * mf
-    steps = 1 if bool(m.all()) else max(int(outer), 1)
-    x = None
-    for _ in range(steps):
-        full = y if x is None else y + op.forward(x) * (1 - mf)
-        x = normal.solve(op.adjoint(full), inv)
-    return x

@@ -133,10 +133,25 @@ def make_geometry(window: tuple[int, int], d: int, radius: int, pad: bool = True
 class PhaseSpaceOperator:
     """The linear map A: domain image (Ny, Nx) -> view samples (V, My, Mx), and its adjoint.
 
-    Holds the OTFs of a PSF bank (computed once; complex64 half spectra (V, Ny, Nx//2+1)) and the
-    geometry. ``psf``: (V, K, K) float, K odd, centre K//2 = zero displacement (one PSF per used
-    view, conventions.md). ``chunk``: views transformed together (speed vs memory).
-    Calls never change the object's state.
+    The one owner of the phase-space model: every solver (:mod:`metasensor.solvers`), the
+    registration of a bank and DAO's shift measurement apply this operator.
+
+    Parameters
+    ----------
+    psf : array_like or torch.Tensor
+        ``(V, K, K)`` float PSFs, K odd, centre ``K//2`` = zero displacement (one per used view,
+        in the order of the data; docs/conventions.md), in photons per unit image intensity.
+    geometry : Geometry
+        Where the window of view samples sits in the estimate domain (:func:`make_geometry`).
+    device : str or torch.device, optional
+        Where the spectra live (default :func:`metasensor.backend.resolve_device`).
+    chunk : int
+        Views transformed together (speed against memory).
+
+    Notes
+    -----
+    Holds the bank (``psf``, on the device) and its OTFs (complex64 half spectra
+    ``(V, Ny, Nx//2+1)``), computed once. Calls never change the object's state.
     """
 
     def __init__(self, psf, geometry: Geometry, device=None, chunk: int = 8):
@@ -156,10 +171,21 @@ class PhaseSpaceOperator:
         if self.k > min(ny, nx):
             raise ValueError(f"PSF size {self.k} exceeds the estimate domain {ny}x{nx}")
         self.chunk = max(int(chunk), 1)
+        self.psf = psf_t
         self.otf = self._otfs(psf_t)
         my, mx = geometry.grid
         self._cols = torch.arange(nx // 2 + 1, device=self.device) % mx
         self.psf_sums = psf_t.sum(dim=(-2, -1))
+
+    @property
+    def domain_shape(self) -> tuple[int, int]:
+        """Shape ``(Ny, Nx)`` of the images A applies to."""
+        return self.geometry.domain
+
+    @property
+    def range_shape(self) -> tuple[int, int, int]:
+        """Shape ``(V, My, Mx)`` of the view samples A returns."""
+        return (self.n_views, *self.geometry.grid)
 
     # ------------------------------------------------------------------ setup
     def _otfs(self, psf: torch.Tensor) -> torch.Tensor:
@@ -289,3 +315,34 @@ class PhaseSpaceOperator:
         small = torch.fft.fft2(mask.to(torch.float32))[..., self._cols]
         spec = (otf_sum.view(d, my, -1).conj() * small[None]).reshape(ny, -1)
         return self.image_from_spectrum(spec)
+
+    # ------------------------------------------------------------------ derived operators
+    def normal(self):
+        """The folded normal operator AᵀA (:class:`metasensor.phasespace.normal.FoldedNormal`),
+        built from this operator's bank (My·Mx·d⁴·8 bytes)."""
+        from metasensor.phasespace.normal import FoldedNormal
+
+        return FoldedNormal(self)
+
+    def masked_normal(self, mask, normal=None):
+        """A callable ``v -> AᵀMA v`` for the observed samples ``mask`` (My, Mx)
+        (:func:`metasensor.phasespace.masked_normal.masked_normal`); ``normal``: this
+        operator's :meth:`normal`, when already built."""
+        from metasensor.phasespace.masked_normal import masked_normal
+
+        m = torch.as_tensor(mask, dtype=torch.bool, device=self.device)
+        return masked_normal(self, self.normal() if normal is None else normal, m)
+
+    def norm(self, iterations: int = 30, seed: int = 0) -> float:
+        """The operator norm ‖A‖₂ (largest singular value), by power iteration on AᵀA from a
+        seeded random image; ``iterations`` products (relative error ~ (λ₂/λ₁)^iterations)."""
+        gen = torch.Generator(device="cpu").manual_seed(int(seed))
+        x = torch.rand(self.domain_shape, generator=gen).to(self.device)
+        value = 0.0
+        for _ in range(max(int(iterations), 1)):
+            x = self.adjoint(self.forward(x))
+            value = float(torch.linalg.vector_norm(x))
+            if value == 0.0:
+                return 0.0
+            x = x / value
+        return math.sqrt(value)

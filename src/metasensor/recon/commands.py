@@ -111,14 +111,6 @@ def _upsampled_block_mean(view: np.ndarray, d: int, f: int) -> np.ndarray:
     return ay @ view @ ax.T
 
 
-def _parse_blocks(text: str) -> tuple[int, int]:
-    try:
-        by, bx = (int(t) for t in text.lower().split("x"))
-    except ValueError:
-        raise ValueError(f"--blocks must look like 4x4, got {text!r}") from None
-    return by, bx
-
-
 def image_meta(rec, origin) -> dict:
     """What an image's description keeps under "metasensor": its kind, the method, and the
     sensor ``origin`` (row, col) of the views it came from when they stored one (realign's:
@@ -199,6 +191,7 @@ def register(app: typer.Typer) -> None:
         )
         from metasensor.optics.psf_io import parse_zernike, read_npy
         from metasensor.recon.api import reconstruct
+        from metasensor.recon.blocks import parse_pair
 
         if psf is not None and config is not None:
             raise ValueError("give either --psf or --config, not both")
@@ -262,7 +255,8 @@ def register(app: typer.Typer) -> None:
                                      dtype="f4", fill_value=0.0)
         try:
             rec = reconstruct(stack, cfg, method=method, zernike=parse_zernike(zernike),
-                              field_zernike=fz, blocks=_parse_blocks(blocks), overlap=overlap,
+                              field_zernike=fz, blocks=parse_pair(blocks, "--blocks"),
+                              overlap=overlap,
                               iterations=iterations, device=device, psf=bank, subsets=subsets,
                               scheduler=scheduler, progress=True, out=target, solver=solver,
                               register=register_views, view_radius=view_radius)

@@ -1,10 +1,10 @@
-"""Run block tasks through Dask: the local threaded scheduler, or a dask.distributed cluster.
+"""Run block tasks locally (a thread pool) or on a dask.distributed cluster.
 
-``scheduler``: ``None`` or ``"threads"`` (dask's local threaded scheduler, the default),
-``"sync"`` (one thread, for debugging), an address such as ``"tcp://10.0.0.1:8786"`` (connects a
+``scheduler``: ``None`` or ``"threads"`` (local threads, the default), ``"sync"`` (one after
+another, for debugging), an address such as ``"tcp://10.0.0.1:8786"`` (connects a
 ``dask.distributed.Client``), or a ``Client`` / ``LocalCluster`` object. Results are handed to
-``on_result`` as they arrive, so the caller can write each block out and drop it: at most
-``num_workers`` blocks (local) are held in memory at once.
+``on_result`` as they arrive (in completion order), so the caller can write each block out and
+drop it: at most ``num_workers`` blocks (local) are in flight at once.
 """
 
 from __future__ import annotations
@@ -25,6 +25,32 @@ def _client_for(scheduler):
     return Client(str(scheduler)), True
 
 
+def _run_local(func, tasks: list, on_result, threads: bool, num_workers, progress) -> None:
+    """In this process: one after another (``threads`` False), or on ``num_workers`` threads,
+    each result handed on as soon as it is done (a slow block never idles the others)."""
+    from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
+
+    workers = max(int(num_workers or 1), 1) if threads else 1
+    if workers == 1:
+        for task in tasks:
+            on_result(func(task))
+            if progress is not None:
+                progress(1)
+        return
+    pending = iter(tasks)
+    with ThreadPoolExecutor(max_workers=workers) as pool:
+        running = {pool.submit(func, t) for _, t in zip(range(workers), pending, strict=False)}
+        while running:
+            done, running = wait(running, return_when=FIRST_COMPLETED)
+            for future in done:
+                on_result(future.result())
+                if progress is not None:
+                    progress(1)
+                nxt = next(pending, None)
+                if nxt is not None:
+                    running.add(pool.submit(func, nxt))
+
+
 def run_tasks(func: Callable[[Any], Any], tasks: Iterable[Any], on_result: Callable[[Any], None],
               scheduler=None, num_workers: int | None = None, progress=None) -> None:
     """Evaluate ``func(task)`` for every task; call ``on_result(result)`` for each, in any order.
@@ -36,16 +62,7 @@ def run_tasks(func: Callable[[Any], Any], tasks: Iterable[Any], on_result: Calla
         return
     local = scheduler is None or (isinstance(scheduler, str) and scheduler in ("threads", "sync"))
     if local:
-        import dask
-
-        mode = "threads" if scheduler is None else scheduler
-        workers = 1 if mode == "sync" else max(int(num_workers or 1), 1)
-        for start in range(0, len(tasks), workers):
-            batch = [dask.delayed(func, pure=False)(t) for t in tasks[start:start + workers]]
-            for result in dask.compute(*batch, scheduler=mode, num_workers=workers):
-                on_result(result)
-                if progress is not None:
-                    progress(1)
+        _run_local(func, tasks, on_result, scheduler != "sync", num_workers, progress)
         return
     if isinstance(scheduler, str) and "://" not in scheduler:
         raise ValueError(f"scheduler must be 'threads', 'sync' or an address like "

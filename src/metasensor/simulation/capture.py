@@ -224,6 +224,8 @@ def simulate(scene, cfg: SystemConfig, zernike=None, field_zernike=None, depth=N
     if not isinstance(cfg, SystemConfig):
         raise TypeError(f"cfg must be a SystemConfig, got {type(cfg).__name__}")
     scene = _place(_check_scene(scene), sensor_shape)
+    if scan is not None and not (isinstance(scan, int | np.integer) and scan >= 1):
+        raise ValueError(f"scan must be a positive integer period, got {scan!r}")
     period = cfg.scan if scan is None else scan
     if scan_order is not None and not isinstance(scan_order, str) and scan is None:
         from metasensor.sensor.scan import period_of
@@ -241,8 +243,6 @@ def simulate(scene, cfg: SystemConfig, zernike=None, field_zernike=None, depth=N
     if ly < 1 or lx < 1:
         raise ValueError(f"scene {shape} holds no lenslet over a {p}x{p} scan "
                          f"(needs at least {n + (p - 1) * d} px per side)")
-    if scan is not None and not (isinstance(scan, int | np.integer) and scan >= 1):
-        raise ValueError(f"scan must be a positive integer period, got {scan!r}")
     if scale is not None and not (isinstance(scale, int | float | np.floating)
                                   and math.isfinite(scale) and scale > 0):
         raise ValueError(f"scale must be a positive number of DN per scene unit, got {scale!r}")

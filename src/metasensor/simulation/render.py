@@ -55,14 +55,6 @@ def fft_size(n: int, multiple: int) -> int:
         m += 1
 
 
-def _tile_samples(stride: int, c: int, target: int) -> tuple[int, int]:
-    """(samples per tile, FFT length) with FFT length a 5-smooth multiple of ``stride``."""
-    n = max(1, (target - 2 * c - 1) // stride + 1)
-    size = fft_size(stride * (n - 1) + 2 * c + 1, stride)
-    n = (size - 2 * c - 1) // stride + 1
-    return n, size
-
-
 def _plan(count: int, stride: int, c: int, tile: int) -> tuple[int, int]:
     """Tiling of ``count`` samples along one axis: (samples per tile, FFT length), choosing the
     number of tiles that minimises a cost model (products ∝ tiles · P; the kernels' own FFTs

@@ -1,0 +1,176 @@
+"""One block of :func:`metasensor.reconstruct`: window → bank → optional registration → solve.
+
+A :class:`BlockTask` carries what one block needs (picklable, for dask.distributed workers);
+:func:`reconstruct_block` returns the block's region image and what was estimated on the way.
+The bank is a given one, ``psf_fn``'s or ``view_psfs``' of the block's aberration, or, with DAO
+(``dao`` set), the bank of the block's estimated wavefront (:func:`metasensor.dao.banks.
+block_psfs`). The views of the bank's visiting order become the operator's data
+(:class:`metasensor.phasespace.operator.PhaseSpaceOperator`), which the solver fits
+(:func:`metasensor.solvers.solve`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+
+from metasensor.config import SystemConfig
+from metasensor.dao.estimate import DaoOptions
+from metasensor.recon.blocks import Block
+
+__all__ = ["BlockTask", "BlockResult", "reconstruct_block", "default_psfs"]
+
+
+@dataclass
+class BlockTask:
+    """Everything one block needs (picklable: built with keywords, no callables but
+    ``psf_fn``/``progress``).
+
+    Attributes
+    ----------
+    block : Block
+    cfg : SystemConfig
+    views : array
+        The full view stack (NumPy or zarr, sliced lazily) or, with ``windowed``, the window.
+    uv : list of (int, int)
+        The views used, in the solver's (subset-major) order.
+    zernike : numpy.ndarray
+        The block's Noll vector (waves): its aberration, or DAO's start.
+    solver : RLOptions or HQSOptions
+        What :func:`metasensor.solvers.solve` runs.
+    dao : DaoOptions or None
+        DAO's settings (wave/geometric), None for plain ISA.
+    """
+
+    block: Block
+    cfg: SystemConfig
+    views: Any
+    uv: list
+    zernike: np.ndarray
+    solver: Any
+    dao: DaoOptions | None = None
+    psf: np.ndarray | None = None
+    psf_fn: Any = None
+    register: bool = False
+    pad: bool = True
+    device: str | None = None
+    windowed: bool = False
+    progress: Any = None  # callable(n), local runs only
+
+
+@dataclass
+class BlockResult:
+    """A block's region image ``(ry, rx)`` float32, its Noll vector (waves), the solver's and
+    DAO's histories, and the registration's (r.m.s. shift per round, wavefront)."""
+
+    block: Block
+    image: np.ndarray
+    zernike: np.ndarray
+    history: list[float]
+    dao_history: list[float] = field(default_factory=list)
+    registration: list[float] = field(default_factory=list)
+    registration_zernike: np.ndarray | None = None
+
+
+def default_psfs(cfg: SystemConfig, zernike, device, size: int | None = None) -> np.ndarray:
+    """``view_psfs(cfg, zernike)`` (None for a zero vector) as float32; ``size``: window K."""
+    from metasensor.optics.psf import view_psfs
+
+    z = None if zernike is None or not np.any(zernike) else np.asarray(zernike, np.float64)
+    kw = {} if size is None else {"size": int(size)}
+    return np.asarray(view_psfs(cfg, zernike=z, depth=0.0, device=device, **kw),
+                      dtype=np.float32)
+
+
+def _report_dao(index, zernike: np.ndarray, history: list[float], tol: float) -> None:
+    """One line per block under the progress bar: the wavefront DAO estimated (waves r.m.s.
+    over Noll 4-45) and how it converged."""
+    import sys
+
+    from tqdm import tqdm
+
+    from metasensor.dao.wavefront import zernike_rms
+
+    rms = zernike_rms(zernike)
+    last = history[-1] if history else 0.0
+    note = ("negligible: no further update" if len(history) == 1 and last < tol
+            else "converged" if last < tol else "not converged")
+    tqdm.write(f"block {tuple(int(i) for i in index)}: wavefront {rms:.3f} λ r.m.s. (Noll "
+               f"4-45), {len(history)} DAO update(s), last {last:.3f} λ: {note}",
+               file=sys.stderr)
+
+
+def _window(task: BlockTask) -> np.ndarray:
+    if task.windowed:
+        window = np.asarray(task.views, dtype=np.float32)
+    else:
+        sy, sx = task.block.window_samples(task.cfg.scan_step_px)
+        window = np.asarray(task.views[:, :, sy, sx], dtype=np.float32)
+    if not np.isfinite(window).all():
+        raise ValueError(f"views contain NaN or infinite values in block {task.block.index}")
+    return window
+
+
+def _bank(task: BlockTask, window: np.ndarray) -> tuple[np.ndarray, np.ndarray, list[float]]:
+    """The block's bank ``(nnum, nnum, K, K)``, Noll vector and DAO history."""
+    zernike = np.asarray(task.zernike, dtype=np.float32)
+    if task.dao is None:
+        if task.psf is not None:
+            return task.psf, zernike, []
+        return (task.psf_fn or default_psfs)(task.cfg, zernike, task.device), zernike, []
+    from metasensor.dao import banks, estimate
+
+    init = zernike if np.any(zernike) else None
+    shown = task.progress is not None  # a local run with a bar: show DAO's updates too
+    dao = replace(task.dao, progress=True) if shown else task.dao
+    res = estimate.run_dao(window, task.cfg, dao, init=init, device=task.device)
+    z_est = np.asarray(res.zernike, dtype=np.float32).ravel()
+    merged = np.zeros(max(zernike.size, z_est.size), np.float32)
+    merged[:z_est.size] = z_est
+    history = [float(h) for h in res.history]
+    if shown:
+        _report_dao(task.block.index, merged, history, task.dao.tol)
+    bank = (task.psf_fn(task.cfg, merged, task.device) if task.psf_fn is not None
+            else banks.block_psfs(task.cfg, res, device=task.device))
+    return bank, merged, history
+
+
+def _operator(task: BlockTask, psf: np.ndarray, data_win: np.ndarray):
+    """The block's operator (on the registered bank with ``register``), the registration's
+    r.m.s. shifts per round and its wavefront."""
+    from metasensor.phasespace.operator import PhaseSpaceOperator, make_geometry
+
+    if task.register:
+        from metasensor.dao.bank_registration import register_views
+
+        reg = register_views(psf, data_win, task.cfg.scan_step_px, cfg=task.cfg, uv=task.uv,
+                             device=task.device, pad=task.pad)
+        return reg.operator, reg.history, reg.zernike
+    geometry = make_geometry(data_win.shape[-2:], task.cfg.scan_step_px, psf.shape[-1] // 2,
+                             pad=task.pad)
+    return PhaseSpaceOperator(psf, geometry, device=task.device), [], None
+
+
+def reconstruct_block(task: BlockTask) -> BlockResult:
+    """Window → bank → optional registration → solve (module docstring) for one block."""
+    import torch
+
+    from metasensor.solvers import solve
+
+    cfg = task.cfg
+    window = _window(task)
+    bank, zernike, dao_history = _bank(task, window)
+    bank = np.asarray(bank, dtype=np.float32)
+    if bank.ndim != 4 or bank.shape[:2] != (cfg.nnum, cfg.nnum):
+        raise ValueError(f"psf bank must have shape (nnum, nnum, K, K) with nnum = {cfg.nnum}, "
+                         f"got {bank.shape}")
+    rows, cols = [u for u, _ in task.uv], [v for _, v in task.uv]
+    op, registration, reg_zernike = _operator(task, bank[rows, cols], window[rows, cols])
+    data, mask = op.geometry.embed(torch.from_numpy(window[rows, cols]).to(op.device))
+    result = solve(op, data, mask, task.solver, progress=task.progress)
+    image = op.geometry.crop(result.estimate).detach().cpu().numpy()
+    ry, rx = task.block.region_in_window()
+    return BlockResult(task.block, np.ascontiguousarray(image[ry, rx], dtype=np.float32),
+                       zernike, result.history, dao_history, registration, reg_zernike)

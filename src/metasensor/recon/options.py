@@ -1,0 +1,133 @@
+"""Settings of :func:`metasensor.reconstruct`: one frozen, validated options object."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields, replace
+from typing import Any
+
+import numpy as np
+
+from metasensor.dao.estimate import DaoOptions
+from metasensor.phasespace.views import ORDERS
+from metasensor.solvers.hqs import HQSOptions
+
+__all__ = ["ReconOptions", "SOLVERS", "HQS_MAX_STEP"]
+
+SOLVERS = ("rl", "hqs")
+HQS_MAX_STEP = 5  # HQS up to this scan step (pixels): a 1 x 1 scan would factor 225² systems
+
+
+def _int_or_none(name: str, value, low: int) -> None:
+    if value is not None and (isinstance(value, bool) or not isinstance(value, int | np.integer)
+                              or value < low):
+        raise ValueError(f"{name} must be an integer >= {low} (or None), got {value!r}")
+
+
+@dataclass(frozen=True, eq=False)
+class ReconOptions:
+    """Everything :func:`metasensor.reconstruct` takes besides the views, the system, the method,
+    the aberration and the block grid (frozen, validated).
+
+    Attributes
+    ----------
+    overlap : int
+        Block overlap in output pixels (default 20).
+    iterations, subsets : int or None
+        Richardson–Lucy's iterations and view subsets per iteration (defaults 5, and 16 or 1 for
+        scan steps above 5 px: :func:`metasensor.solvers.richardson_lucy.default_subsets`).
+    solver : str or None
+        ``"hqs"`` (a prior: :mod:`metasensor.solvers.hqs`) or ``"rl"``; None: HQS unless
+        ``iterations``/``subsets`` is given or the scan step exceeds 5 px.
+    solver_options : HQSOptions or None
+        The HQS solver's settings (prior, ``lam_scale``, ``noise``, ...).
+    register : bool
+        Register every block's views against its bank first
+        (:mod:`metasensor.dao.bank_registration`; for banks that may be off). Default False.
+    view_radius : float or None
+        Pupil radius (in views) of the views used (``cfg.view_mask``; default the authors' 113).
+    order : str
+        View visiting order: "spiral", "radius" or "raster" (:mod:`metasensor.phasespace.views`).
+    margin : int or None
+        Pixels of view data around each block (default: a given bank's radius, else nnum).
+    pad : bool
+        Pad the estimate by the PSF radius (linear convolution; False: circular, for study).
+    dao : DaoOptions or None
+        DAO's settings for ``method="wave"``/``"geometric"`` (its ``method`` is set from
+        ``reconstruct``'s).
+    device : str or None
+        "cpu" or "cuda" (default: CUDA when present).
+    psf : numpy.ndarray or None
+        A given ``(nnum, nnum, K, K)`` bank for every block (``method="isa"`` only).
+    psf_fn : callable or None
+        ``psf_fn(cfg, zernike (J,), device) -> bank``, replacing ``optics.psf.view_psfs``.
+    scheduler : None, "threads", "sync", an address "tcp://host:port", or a dask Client/cluster
+    num_workers : int or None
+        Local blocks run at once (default 1).
+    out : array or None
+        A writable ``(H, W)`` float32 array (e.g. zarr) to stitch into; None: NumPy.
+    progress : bool
+        Show a progress bar.
+    """
+
+    overlap: int = 20
+    iterations: int | None = None
+    subsets: int | None = None
+    solver: str | None = None
+    solver_options: HQSOptions | None = None
+    register: bool = False
+    view_radius: float | None = None
+    order: str = "spiral"
+    margin: int | None = None
+    pad: bool = True
+    dao: DaoOptions | None = None
+    device: Any = None
+    psf: Any = None
+    psf_fn: Any = None
+    scheduler: Any = None
+    num_workers: int | None = None
+    out: Any = None
+    progress: bool = False
+
+    def __post_init__(self) -> None:
+        for name, low in (("iterations", 0), ("subsets", 1), ("num_workers", 1),
+                          ("margin", 0)):
+            _int_or_none(name, getattr(self, name), low)
+        _int_or_none("overlap", self.overlap, 0)
+        r = self.view_radius
+        if r is not None and (isinstance(r, bool) or not (
+                isinstance(r, int | float | np.number) and math.isfinite(r) and r >= 0)):
+            raise ValueError(f"view_radius must be a finite number of views >= 0, got {r!r}")
+        if self.solver is not None and self.solver not in SOLVERS:
+            raise ValueError(f"solver must be one of {SOLVERS}, got {self.solver!r}")
+        if self.order not in ORDERS:
+            raise ValueError(f"order must be one of {ORDERS}, got {self.order!r}")
+        if self.solver_options is not None and not isinstance(self.solver_options, HQSOptions):
+            raise TypeError("solver_options must be HQSOptions")
+        if self.dao is not None and not isinstance(self.dao, DaoOptions):
+            raise TypeError("dao must be DaoOptions")
+        if self.psf_fn is not None and not callable(self.psf_fn):
+            raise TypeError("psf_fn must be callable(cfg, zernike, device)")
+
+    @classmethod
+    def resolve(cls, options: ReconOptions | None, settings: dict) -> ReconOptions:
+        """``options`` (default ``ReconOptions()``) with ``settings`` (keywords named as its
+        fields) replacing its values; unknown names are refused."""
+        base = cls() if options is None else options
+        if not isinstance(base, cls):
+            raise TypeError(f"options must be ReconOptions, got {type(base).__name__}")
+        names = {f.name for f in fields(cls)}
+        unknown = sorted(set(settings) - names)
+        if unknown:
+            raise TypeError(f"reconstruct() got unknown settings {unknown}")
+        return replace(base, **settings) if settings else base
+
+    def resolved_solver(self, step: int) -> str:
+        """The solver for a scan step of ``step`` pixels (see ``solver``)."""
+        if self.solver is not None:
+            if self.solver == "hqs" and step > HQS_MAX_STEP:
+                raise ValueError(f"solver='hqs' needs a scan step of at most {HQS_MAX_STEP} px "
+                                 f"(scan >= 3 for nnum 15), got {step} px; use solver='rl'")
+            return self.solver
+        rl_asked = self.iterations is not None or self.subsets is not None
+        return "rl" if rl_asked or step > HQS_MAX_STEP else "hqs"

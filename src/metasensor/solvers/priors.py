@@ -1,0 +1,130 @@
+"""Image priors for half-quadratic splitting (:mod:`metasensor.solvers.splitting`).
+
+A prior is a penalty ``R(L x)`` on a linear transform ``L`` of the image (the *analysis* form):
+``L`` is the gradient stencil :class:`Gradient` for sparse-gradient priors, or :class:`Identity`
+for priors on the image itself (Tikhonov, a plug-and-play denoiser). Half-quadratic splitting
+introduces ``w ≈ L x`` and alternates
+
+    w-step:  w = prior.prox(L x, 1 / beta)         x-step:  (λAᵀA + β LᵀL) x = λAᵀy + β Lᵀw,
+
+so a prior is two things, and a new one is one class with them:
+
+- ``transform``: the linear map ``L`` (``forward``, ``adjoint``, ``gram`` = ``adjoint∘forward``
+  and ``symbol(shape, device)``: the eigenvalues of the circulant ``LᵀL`` on the unshifted FFT
+  grid, which the Fourier x-steps need);
+- ``prox(z, weight)``: the proximal operator ``argmin_w weight·R(w) + ½‖w − z‖²``, element-wise
+  or not, on ``z`` of the transform's output shape (``(2, ..., H, W)`` for the gradient,
+  ``(..., H, W)`` for the identity). ``weight`` > 0 is a float; ``z`` is a float32 tensor on the
+  solver's device, and the result must have its shape, dtype and device and must not modify it.
+
+The image the prior sees is in the solver's units (the phase-space HQS normalises the image to
+mean 0.5; Krishnan–Fergus to maximum 1); λ, the data weight, is defined once, in
+:mod:`metasensor.solvers.splitting`.
+
+:class:`HyperLaplacian` is Krishnan & Fergus's ``R(w) = Σ |w|^alpha`` (NeurIPS 2009) on the
+gradient, with the closed-form proximal operators of :mod:`metasensor.solvers.hyper_laplacian`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Protocol, runtime_checkable
+
+import torch
+
+from metasensor.solvers.hyper_laplacian import solve_w_table
+
+__all__ = ["Transform", "Prior", "Gradient", "Identity", "HyperLaplacian", "GRADIENT",
+           "IDENTITY"]
+
+
+@runtime_checkable
+class Transform(Protocol):
+    """A linear map ``L`` of images ``(..., H, W)`` with its adjoint (see the module docstring)."""
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor: ...
+
+    def adjoint(self, w: torch.Tensor) -> torch.Tensor: ...
+
+    def gram(self, x: torch.Tensor) -> torch.Tensor: ...
+
+    def symbol(self, shape: tuple[int, int], device) -> torch.Tensor: ...
+
+
+@runtime_checkable
+class Prior(Protocol):
+    """An HQS prior: a transform ``L`` and
+    ``prox(z, weight) = argmin_w weight·R(w) + ½‖w − z‖²``."""
+
+    transform: Transform
+
+    def prox(self, z: torch.Tensor, weight: float) -> torch.Tensor: ...
+
+
+@dataclass(frozen=True)
+class Gradient:
+    """The gradient stencil ∇ of every solver here: circular *forward* first differences,
+    ``(∇x)_y(p) = x(p + e_y) − x(p)`` and likewise along x, stacked as ``(2, ..., H, W)``
+    (component 0 along rows, 1 along columns)."""
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return torch.stack([torch.roll(x, -1, -2) - x, torch.roll(x, -1, -1) - x])
+
+    def adjoint(self, w: torch.Tensor) -> torch.Tensor:
+        wy, wx = w[0], w[1]
+        return (torch.roll(wy, 1, -2) - wy) + (torch.roll(wx, 1, -1) - wx)
+
+    def gram(self, x: torch.Tensor) -> torch.Tensor:
+        return self.adjoint(self.forward(x))
+
+    def symbol(self, shape: tuple[int, int], device) -> torch.Tensor:
+        """``|D_y|² + |D_x|² = 4 sin²(π k_y) + 4 sin²(π k_x)`` on the FFT grid ``shape``."""
+        ky = torch.fft.fftfreq(int(shape[0]), device=device)[:, None]
+        kx = torch.fft.fftfreq(int(shape[1]), device=device)[None, :]
+        return 4 * torch.sin(math.pi * ky) ** 2 + 4 * torch.sin(math.pi * kx) ** 2
+
+
+@dataclass(frozen=True)
+class Identity:
+    """``L = I``: a prior on the image itself."""
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return x
+
+    def adjoint(self, w: torch.Tensor) -> torch.Tensor:
+        return w
+
+    def gram(self, x: torch.Tensor) -> torch.Tensor:
+        return x
+
+    def symbol(self, shape: tuple[int, int], device) -> torch.Tensor:
+        return torch.ones((int(shape[0]), int(shape[1])), device=device)
+
+
+GRADIENT = Gradient()
+IDENTITY = Identity()
+
+
+@dataclass(frozen=True)
+class HyperLaplacian:
+    """``R(∇x) = Σ_i |(∇x)_i|^alpha``, alpha 2/3 (default) or 1 (total variation): the
+    sparse-gradient prior of natural images (Krishnan & Fergus 2009).
+
+    ``prox`` is exact for alpha = 1 (soft threshold) and tabulated for 2/3 (the lookup table of
+    :func:`metasensor.solvers.hyper_laplacian.solve_w_table`, one table per gradient component
+    of every image of a batch ``(2, ..., H, W)``, so a batch gives its images' own results).
+    """
+
+    alpha: float = 2.0 / 3.0
+    transform: Gradient = GRADIENT
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.alpha, int | float) or (
+                self.alpha != 1.0 and abs(self.alpha - 2.0 / 3.0) > 1e-9):
+            raise ValueError(f"alpha must be 2/3 or 1, got {self.alpha!r}")
+
+    def prox(self, z: torch.Tensor, weight: float) -> torch.Tensor:
+        beta = 1.0 / float(weight)
+        flat = z.reshape(-1, *z.shape[-2:])
+        return torch.stack([solve_w_table(c, beta, self.alpha) for c in flat]).reshape(z.shape)
