@@ -110,11 +110,24 @@ class Geometry:
 
 
 def make_geometry(window: tuple[int, int], d: int, radius: int, pad: bool = True) -> Geometry:
-    """Domain for a window of view samples and a PSF of ``radius`` pixels (K = 2·radius + 1).
+    """The estimate's domain for a window of view samples.
 
-    ``pad=True``: margins of at least ``radius`` pixels beyond the outermost samples (linear
-    convolution on the observed samples), rounded up to a fast FFT size. ``pad=False``: the domain
-    is the window itself (circular convolution; wraps around at the edges; for comparison).
+    Parameters
+    ----------
+    window : (int, int)
+        ``(Sy, Sx)`` view samples of data.
+    d : int
+        View sample spacing, pixels (``cfg.scan_step_px``).
+    radius : int
+        PSF radius, pixels (K = 2·radius + 1).
+    pad : bool
+        True: margins of at least ``radius`` pixels beyond the outermost samples (linear
+        convolution on the observed samples), rounded up to a fast FFT size; False: the domain
+        is the window itself (circular convolution, wraps around at the edges; for comparison).
+
+    Returns
+    -------
+    Geometry
     """
     sy, sx = (int(window[0]), int(window[1]))
     if sy < 1 or sx < 1:
@@ -282,7 +295,20 @@ class PhaseSpaceOperator:
 
     # ------------------------------------------------------------------ the operator
     def forward(self, image, views=None) -> torch.Tensor:
-        """A·image: (Ny, Nx) domain image -> (V, My, Mx) view samples (views: index tensor)."""
+        """``A·image``, the model's view samples.
+
+        Parameters
+        ----------
+        image : array_like
+            ``(Ny, Nx)`` image on the domain, in photons per pixel.
+        views : torch.Tensor, optional
+            Indices of the views to predict (default all, in the bank's order).
+
+        Returns
+        -------
+        torch.Tensor
+            ``(V, My, Mx)`` float32 view samples on the domain's sample grid, in photons.
+        """
         image = torch.as_tensor(image, dtype=torch.float32, device=self.device)
         if tuple(image.shape) != self.geometry.domain:
             raise ValueError(f"image must have the domain shape {self.geometry.domain}, "
@@ -291,7 +317,20 @@ class PhaseSpaceOperator:
         return torch.cat([self.predict(spec, c) for c in self._chunks(views)])
 
     def adjoint(self, samples, views=None) -> torch.Tensor:
-        """Aᵀ·samples: (V, My, Mx) -> (Ny, Nx) domain image."""
+        """``Aᵀ·samples``, the back-projection.
+
+        Parameters
+        ----------
+        samples : array_like
+            ``(V, My, Mx)`` view samples (``V`` = ``len(views)`` when given).
+        views : torch.Tensor, optional
+            Indices of the views the samples belong to (default all).
+
+        Returns
+        -------
+        torch.Tensor
+            ``(Ny, Nx)`` float32 domain image.
+        """
         samples = torch.as_tensor(samples, dtype=torch.float32, device=self.device)
         n = self.n_views if views is None else len(views)
         if tuple(samples.shape) != (n, *self.geometry.grid):

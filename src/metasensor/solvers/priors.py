@@ -17,6 +17,11 @@ so a prior is two things, and a new one is one class with them:
   ``(..., H, W)`` for the identity). ``weight`` > 0 is a float; ``z`` is a float32 tensor on the
   solver's device, and the result must have its shape, dtype and device and must not modify it.
 
+A plug-and-play denoiser ``D_σ`` (Venkatakrishnan et al. 2013) is a prior on the image:
+``transform = IDENTITY`` and ``prox(z, weight) = D_σ(z)`` with ``σ² = weight`` (the MAP denoiser
+of Gaussian noise of variance ``weight`` is exactly this proximal operator); pass it as
+``HQSOptions(prior=...)``.
+
 The image the prior sees is in the solver's units (the phase-space HQS normalises the image to
 mean 0.5; Krishnan–Fergus to maximum 1); λ, the data weight, is defined once, in
 :mod:`metasensor.solvers.splitting`.
