@@ -2,12 +2,14 @@
 
 For an estimate x̂ of a truth x, the radially averaged ratio of error power to truth power,
 
-    R(f) = Σ_{|k| ∈ bin f} |F[w·(x̂ − x)](k)|²  /  Σ_{|k| ∈ bin f} |F[w·(x − x̄)](k)|²,
+    R(f) = Σ_{|k| ∈ bin f} |F[w·(e − ē)](k)|²  /  Σ_{|k| ∈ bin f} |F[w·(x − x̄)](k)|²,
 
-with w a separable Hann window (none for periodic images) and x̄ the truth's mean, says per
-spatial frequency how much of the truth's content the estimate gets wrong: 0 is exact, 1 is as
-wrong as returning a flat image there (a prior that flattens texture reads ≈ 1 at the texture's
-frequencies), above 1 is worse than nothing (noise, ringing, aliases). The *resolved frequency*
+with e = x̂ − x the error, w a separable Hann window (none for periodic images), and ē, x̄ the
+means (a mean-level error is not a resolution error, and windowed it would leak into the lowest
+bins, where a flat scene has little power), says per spatial frequency how much of the truth's
+content the estimate gets wrong: 0 is exact, 1 is as wrong as returning a flat image there (a
+prior that flattens texture reads ≈ 1 at the texture's frequencies), above 1 is worse than
+nothing (noise, ringing, aliases). The *resolved frequency*
 is the highest frequency below which R stays under the threshold (0.5 by default: half of the
 truth's power right), interpolated linearly between bin centres; 0 if the first bin fails and
 0.5 cycles/px (Nyquist) if no bin does. It is the frequency-resolved form of the Fourier ring
@@ -118,7 +120,8 @@ def spectral_fidelity(image, truth, threshold: float = 0.5, bins: int | None = N
     if n < 2:
         raise ValueError(f"bins must be >= 2, got {bins!r}")
     win = np.outer(np.hanning(h), np.hanning(w)) if window else np.ones((h, w))
-    err = np.abs(np.fft.fft2(win * (a - b))) ** 2
+    diff = a - b
+    err = np.abs(np.fft.fft2(win * (diff - diff.mean()))) ** 2
     sig = np.abs(np.fft.fft2(win * (b - b.mean()))) ** 2
     fy, fx = np.fft.fftfreq(h), np.fft.fftfreq(w)
     rad = np.hypot(fy[:, None], fx[None, :])

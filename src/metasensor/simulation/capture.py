@@ -47,7 +47,12 @@ from metasensor.simulation.noise import NoiseModel, add_noise, apply_noise, meas
 from metasensor.simulation.render import Lattice, sampled_conv
 from metasensor.simulation.turbulence import Turbulence, screen_phase
 
-__all__ = ["Capture", "simulate", "plain_lightfield"]
+__all__ = ["Capture", "simulate", "plain_lightfield", "OPERATING_FOCUS_OFFSET"]
+
+#: The documented operating point [waves r.m.s. of Noll Z4]: the meta-imaging sensor focused this
+#: far off the scene's plane, where every view samples the field at its own phase (see
+#: ``benchmarks/bench_quality.py`` and docs/decisions.md for the measurement).
+OPERATING_FOCUS_OFFSET = 0.25
 
 
 @dataclass
@@ -204,7 +209,7 @@ def simulate(scene, cfg: SystemConfig, zernike=None, field_zernike=None, depth=N
              scale: float | None = None, sensor_shape=None, field_blocks=(4, 4),
              depth_planes: int = 8, ao_segments: int = 15, comparison: bool = True,
              upsample: str = "spline", psf=None, device=None,
-             progress: bool = False) -> Capture:
+             progress: bool = False, focus_offset: float = 0.0) -> Capture:
     """Simulate one scan period of raw frames of ``scene`` (H, W) (see the module docstring).
 
     zernike: Noll vector [waves] for the whole field; field_zernike: (by, bx, J) vectors at block
@@ -220,7 +225,14 @@ def simulate(scene, cfg: SystemConfig, zernike=None, field_zernike=None, depth=N
     psf: optional provider ``psf(cfg, zernike, depth, phase=, device=) -> (nnum, nnum, Kf, Kf)``
     of fine view banks in photons per unit point (default: ``view_psfs(subsample=3) · 9``),
     e.g. measured PSFs.
+    focus_offset: a deliberate defocus of the meta-imaging sensor [waves r.m.s., Noll Z4] (its
+    MLA moved off the lens's image of the scene), added to the views' wavefront only: the
+    comparison sensors stay in focus; ``cap.zernike`` includes it (pass it to ``reconstruct``).
+    :data:`OPERATING_FOCUS_OFFSET` is the documented operating point (default 0: in focus).
     """
+    if not (isinstance(focus_offset, int | float | np.floating) and math.isfinite(focus_offset)):
+        raise ValueError(f"focus_offset must be a finite number of waves, got {focus_offset!r}")
+    focus = np.array([0.0, 0.0, 0.0, float(focus_offset)]) if focus_offset else None
     if not isinstance(cfg, SystemConfig):
         raise TypeError(f"cfg must be a SystemConfig, got {type(cfg).__name__}")
     scene = _place(_check_scene(scene), sensor_shape)
@@ -267,7 +279,7 @@ def simulate(scene, cfg: SystemConfig, zernike=None, field_zernike=None, depth=N
                    turbulence=turbulence, seed=seed, read_noise=read_noise, bit_depth=bits,
                    exposure=exposure, sensor_shape=sensor_shape, field_blocks=field_blocks,
                    depth_planes=depth_planes, ao_segments=ao_segments, upsample=upsample,
-                   psf=psf, device=device)
+                   psf=psf, device=device, focus_offset=focus_offset)
 
     grid = None if field_zernike is None else field_grid(field_zernike, shape, field_blocks)
     comps, planes = build_components(shape, zernike, grid, depth, depth_planes)
@@ -289,7 +301,8 @@ def simulate(scene, cfg: SystemConfig, zernike=None, field_zernike=None, depth=N
     if motion is None and turbulence is None:
         rows, cols = Lattice(n // 2, d, ly * p), Lattice(n // 2, d, lx * p)
         _accumulate(scene, tqdm(comps, desc="views", disable=not progress),
-                    lambda cp: banks.views(cp.zernike, cp.depth), rows, cols, views, dev)
+                    lambda cp: banks.views(add_zernike(cp.zernike, focus), cp.depth), rows, cols,
+                    views, dev)
     else:
         for t, (r, c) in enumerate(tqdm(order, desc="frames", disable=not progress)):
             img = scene if motion is None else motion.scene_at(scene, t - tref)
@@ -297,7 +310,7 @@ def simulate(scene, cfg: SystemConfig, zernike=None, field_zernike=None, depth=N
             key = None if screens is None else t
             sub = torch.zeros((n * n, ly, lx), dtype=torch.float32, device=dev)
             _accumulate(img, comps, lambda cp, ph=phase, k=key: banks.views(
-                cp.zernike, cp.depth, ph, k), Lattice(r * d + n // 2, n, ly),
+                add_zernike(cp.zernike, focus), cp.depth, ph, k), Lattice(r * d + n // 2, n, ly),
                 Lattice(c * d + n // 2, n, lx), sub, dev)
             views[:, r::p, c::p] = sub
     clean = views.reshape(n, n, ly * p, lx * p).cpu().numpy()
@@ -319,9 +332,9 @@ def simulate(scene, cfg: SystemConfig, zernike=None, field_zernike=None, depth=N
     crop = (slice(o, o + ly * n), slice(o, o + lx * n))
     truth = (reference[crop] * np.float32(scale)).astype(np.float32)
 
-    true_z = zernike
+    true_z = add_zernike(zernike, focus)
     if grid is not None:  # total (global + field) vectors at the block centres
-        true_z = np.stack([np.stack([add_zernike(zernike, grid[i, j])
+        true_z = np.stack([np.stack([add_zernike(true_z, grid[i, j])
                                      for j in range(grid.shape[1])])
                            for i in range(grid.shape[0])])
     cap = Capture(frames=frames, views=views_noisy, views_clean=clean, truth=truth,
