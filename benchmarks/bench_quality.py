@@ -153,21 +153,32 @@ def case(name: str, size: int, study: str, zernike=None, offset: float = 0.0,
     return rows
 
 
-def run(quick: bool = False) -> list[dict]:
+def plan(quick: bool = False) -> list[tuple[str, str, float]]:
+    """The cases (scene, study, focus offset), most telling first (so that a run cut short by a
+    busy machine still holds the operating-point comparison)."""
+    if quick:
+        return [(n, "aberration-free", 0.0) for n in SCENES_QUICK] + [("bars", "focus", 0.25)]
+    first = [("bars", "aberration-free", 0.0), ("camera", "aberration-free", 0.0),
+             ("bars", "focus", 0.25), ("camera", "focus", 0.25)]
+    rest = [(n, "aberration-free", 0.0) for n in SCENES_FULL if n not in ("bars", "camera")]
+    later = [(n, "focus", off) for off in OFFSETS[2:] for n in FOCUS_SCENES]
+    return first + rest + later
+
+
+def run(quick: bool = False, sink=None) -> list[dict]:
+    """All cases of :func:`plan`; ``sink(rows)`` after each (progressive runs)."""
     import torch
 
     torch.set_num_threads(1)
     size = SIZE_QUICK if quick else SIZE_FULL
-    rows = []
-    for name in SCENES_QUICK if quick else SCENES_FULL:
-        rows += case(name, size, "aberration-free")
-    for name in FOCUS_SCENES[:1] if quick else FOCUS_SCENES:
-        for off in OFFSETS[:2] if quick else OFFSETS:
-            if off == 0.0:
-                found = [r for r in rows if r["study"] == "aberration-free" and r["scene"] == name]
-                rows += [{**r, "study": "focus"} for r in found]
-                continue
-            rows += case(name, size, "focus", offset=off)
+    rows: list[dict] = []
+    for name, study, off in plan(quick):
+        new = case(name, size, study, offset=off)
+        rows += new
+        if study == "aberration-free" and name in FOCUS_SCENES:  # the focus study's offset 0
+            rows += [{**r, "study": "focus"} for r in new]
+        if sink is not None:
+            sink(rows)
     if not quick and ABERRATED_JSON.is_file():
         rows += json.loads(ABERRATED_JSON.read_text())["rows"]
     _plot(rows, HERE / "results" / ("quality_quick.png" if quick else "quality.png"))
@@ -230,6 +241,19 @@ if __name__ == "__main__":
 
             atomic_write_text(ABERRATED_JSON, json.dumps({"rows": result}, indent=2,
                                                         default=float))
+    elif "--progressive" in sys.argv:  # results/quality.json rewritten after every case
+        from metasensor.io.atomic import atomic_write_text
+
+        def _sink(rows):
+            done = len({(r["scene"], r["study"], r["focus_offset_waves"]) for r in rows
+                        if not (r["study"] == "focus" and r["focus_offset_waves"] == 0.0)})
+            atomic_write_text(HERE / "results" / "quality.json", json.dumps(
+                {"benchmark": "quality", "quick": False, "partial": done < len(plan()),
+                 "cases_planned": len(plan()), "cases_done": done, "rows": rows}, indent=2,
+                default=float))
+            print(rows[-1], flush=True)
+
+        run(sink=_sink)
     else:
         for row in run(quick="--quick" in sys.argv):
             print(row)
