@@ -91,7 +91,7 @@ def restore_2d(cap, cfg, zernike=None) -> tuple[np.ndarray, float]:
     (the best of :data:`HL_LAMBDAS` by SSIM to the truth) and that lam."""
     from metasensor.metrics import ssim
     from metasensor.optics.psf import widefield_psf
-    from metasensor.recon.fastdeconv import hyper_laplacian_deconv
+    from metasensor.solvers.krishnan_fergus import hyper_laplacian_deconv
 
     psf = widefield_psf(cfg, zernike=zernike)
     rng = float(cap.truth.max() - cap.truth.min())
