@@ -91,13 +91,13 @@ def restore_2d(cap, cfg, zernike=None) -> tuple[np.ndarray, float]:
     (the best of :data:`HL_LAMBDAS` by SSIM to the truth) and that lam."""
     from metasensor.metrics import ssim
     from metasensor.optics.psf import widefield_psf
-    from metasensor.solvers.krishnan_fergus import hyper_laplacian_deconv
+    from metasensor.solvers.krishnan_fergus import KFOptions, hyper_laplacian_deconv
 
     psf = widefield_psf(cfg, zernike=zernike)
     rng = float(cap.truth.max() - cap.truth.min())
     best = None
     for lam in HL_LAMBDAS:
-        img = hyper_laplacian_deconv(cap.sensor2d, psf, lam=lam)
+        img = hyper_laplacian_deconv(cap.sensor2d, psf, KFOptions(lam=lam))
         s = ssim(img, cap.truth, data_range=rng)
         if best is None or s > best[0]:
             best = (s, img, lam)

@@ -1,4 +1,5 @@
-"""Image priors for plug-and-play reconstruction: a learned denoiser and its training scenes."""
+"""Image priors for plug-and-play reconstruction: a learned denoiser and its training scenes;
+:mod:`metasensor.priors.pnp` plugs the denoiser into the HQS solvers (``pnp_options()``)."""
 
 from metasensor.priors.deadleaves import dead_leaves
 from metasensor.priors.denoiser import CNNDenoiser, DnCNN, load_denoiser
