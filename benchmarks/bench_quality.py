@@ -75,8 +75,8 @@ def scores(image, truth, bars=None) -> dict:
 
     rng = float(truth.max() - truth.min())
     reg = regional_fidelity(image, truth)
-    out = {"ssim": ssim(image, truth, data_range=rng),
-           "psnr_db": psnr(image, truth, data_range=rng),
+    out = {"ssim": ssim(truth=truth, image=image, data_range=rng),
+           "psnr_db": psnr(truth=truth, image=image, data_range=rng),
            "resolved": reg["global"].resolved,
            "resolved_worst_region": min(v.resolved for k, v in reg.items() if k != "global")}
     if bars is not None:
@@ -98,7 +98,7 @@ def restore_2d(cap, cfg, zernike=None) -> tuple[np.ndarray, float]:
     best = None
     for lam in HL_LAMBDAS:
         img = hyper_laplacian_deconv(cap.sensor2d, psf, KFOptions(lam=lam))
-        s = ssim(img, cap.truth, data_range=rng)
+        s = ssim(truth=cap.truth, image=img, data_range=rng)
         if best is None or s > best[0]:
             best = (s, img, lam)
     return best[1], best[2]
