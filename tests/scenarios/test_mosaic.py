@@ -73,6 +73,13 @@ def test_blending_is_exact_on_integer_tiles_and_writes_a_pyramid(tmp_path):
         level1.shape[0], 2, level1.shape[1], 2).mean(axis=(1, 3)), atol=1e-4)
     assert np.array_equal(zarr.open_array(paths[(0, 0)], mode="r")[:], tiles[(0, 0)])
     assert not list(tmp_path.glob(".m.zarr.*"))
+    # an earlier mosaic is replaced; anything else is not
+    blend_tiles(paths, pos, layout.shape, out, ramp=16, chunk=64)
+    (tmp_path / "mine").mkdir()
+    (tmp_path / "mine" / "notes.txt").write_text("keep")
+    with pytest.raises(ValueError, match="not replaced"):
+        blend_tiles(paths, pos, layout.shape, tmp_path / "mine", ramp=16, chunk=64)
+    assert (tmp_path / "mine" / "notes.txt").read_text() == "keep"
 
 
 def test_subpixel_blend_of_registered_tiles_has_no_seam(tmp_path):

@@ -12,7 +12,8 @@ covers. Memory is bounded by a few chunks per worker, whatever the mosaic's size
 The pyramid halves the resolution per level by 2 × 2 means (``dask.array.coarsen``), each level
 read back from the one written before. The store is OME-NGFF 0.4 (Zarr v2 format, axes y, x in
 micrometres, one ``scale`` transformation per level; Moore et al., Nat. Methods 18, 1496 (2021))
-and is written under a temporary name and renamed when complete.
+and is written under a temporary name and put in place when complete; an existing folder is
+replaced only if it is an earlier mosaic of this function.
 
 ``scheduler``: None or "threads" (dask's local threads), "sync", an address
 "tcp://host:port" (a ``dask.distributed.Client`` is connected) or a Client / cluster object.
@@ -26,6 +27,8 @@ import uuid
 from pathlib import Path
 
 import numpy as np
+
+from metasensor.io.atomic import replace_tree
 
 __all__ = ["blend_tiles", "feather", "MARGIN", "open_mosaic"]
 
@@ -83,6 +86,18 @@ def _chunk(block_info=None, *, tiles, positions, ramp, out_dtype):
     return out.astype(out_dtype)
 
 
+def _own_mosaic(path: Path) -> bool:
+    """An earlier mosaic of :func:`blend_tiles` (a Zarr group tagged ``metasensor``)."""
+    import json
+
+    try:
+        attrs = json.loads((path / ".zattrs").read_text())
+    except (OSError, ValueError):
+        return False
+    return (path / ".zgroup").is_file() and isinstance(attrs, dict) and \
+        attrs.get("metasensor", {}).get("kind") == "mosaic"
+
+
 def _compute(store_fn, scheduler):
     if scheduler is None or scheduler in ("threads", "sync"):
         return store_fn(scheduler or "threads")
@@ -122,6 +137,8 @@ def blend_tiles(tiles: dict, positions: dict, shape: tuple[int, int], out: str |
     import zarr
 
     out = Path(out)
+    if out.exists() and not _own_mosaic(out):
+        raise ValueError(f"{out} exists and is not a mosaic written by metasensor: not replaced")
     if set(tiles) != set(positions):
         raise ValueError("tiles and positions must name the same tile indices")
     h, w = (int(v) for v in shape)
@@ -167,9 +184,8 @@ def blend_tiles(tiles: dict, positions: dict, shape: tuple[int, int], out: str |
                 {"type": "scale", "scale": [pixel_size_um * 2**k] * 2}]}
                 for k in range(len(shapes))],
         }]
-        if out.exists():
-            shutil.rmtree(out)
-        tmp.rename(out)
+        root.attrs["metasensor"] = {"kind": "mosaic", "levels": len(shapes)}
+        replace_tree(tmp, out)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
