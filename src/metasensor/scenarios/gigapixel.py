@@ -158,7 +158,8 @@ def run_gigapixel(out: str | Path, settings: GigapixelSettings | None = None,
     xs = [int(round(pos[(0, j)][1])) - c for j in range(1, s.grid[1])]
     rows = []
     for name, img in (("2D sensor", img_2d), ("meta-imaging", img_meta)):
-        rows.append({"sensor": name, "psnr_db": psnr(img[crop], truth[crop], data_range=rngd),
+        rows.append({"sensor": name, "psnr_db": psnr(truth=truth[crop], image=img[crop],
+                                                data_range=rngd),
                      "seam_ratio": seam_ratio(img[crop], ys, xs),
                      "truth_seam_ratio": seam_ratio(truth[crop], ys, xs)})
     lo, hi = float(truth.min()), float(truth.max())

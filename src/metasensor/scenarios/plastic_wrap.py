@@ -79,8 +79,8 @@ def _measure(images: dict, truths: dict, grid, box) -> tuple[list[dict], dict]:
             truth.shape[1],) * 2, strict=True))
         near = resolved_frequency(img[y0:y1, x0:x1], truth[y0:y1, x0:x1])
         maps[name] = fmap
-        rows.append({"sensor": name, "psnr_db": psnr(img, truth, data_range=rng),
-                     "ssim": ssim(img, truth, data_range=rng),
+        rows.append({"sensor": name, "psnr_db": psnr(truth=truth, image=img, data_range=rng),
+                     "ssim": ssim(truth=truth, image=img, data_range=rng),
                      "resolved_mean_cpp": float(fmap.mean()),
                      "resolved_worst_cpp": float(fmap.min()),
                      "resolved_near_object_cpp": near})

@@ -151,7 +151,8 @@ def run_telescope(out: str | Path, settings: TelescopeSettings | None = None,
     rng = float(truth.max() - truth.min())
     images = {"2D sensor": cap.sensor2d, "meta-imaging, no DAO": np.asarray(no_dao.image),
               "meta-imaging + DAO": np.asarray(dao.image)}
-    rows = [{"sensor": k, "psnr_db": psnr(v, truth, data_range=rng)} for k, v in images.items()]
+    rows = [{"sensor": k, "psnr_db": psnr(truth=truth, image=v, data_range=rng)}
+            for k, v in images.items()]
     resid = _residuals(dao, turb, n, s.blocks)
     lat_static = _lattice(kymo_static, cfg.scan)
     kymo_stats = {"lattice_corrected_over_static": _lattice(kymo, cfg.scan) / lat_static,
