@@ -11,10 +11,13 @@ import re
 __all__ = ["SCAN_ORDER_SYNTAX", "SCAN_ORDER_HELP", "SCAN_ORDER_NAMES", "parse_scan_order"]
 
 SCAN_ORDER_NAMES = ("--scan-order", "--order")
-SCAN_ORDER_SYNTAX = ("row-major, serpentine, or the (row,col) phases in acquisition order as "
-                     "'0,0;0,1;0,2;...' ('[(0,0),(0,1),...]' is read too)")
+SCAN_ORDER_SYNTAX = ("row-major, serpentine, spiral, or the (row,col) phases in acquisition "
+                     "order as '0,0;0,1;0,2;...' ('[(0,0),(0,1),...]' is read too; "
+                     "'one-based:1,1;1,2;...' for one-based phases), or a scan-pattern PNG "
+                     "whose pixel (r,c) holds the acquisition index of phase (r,c)")
 SCAN_ORDER_HELP = f"scan order: {SCAN_ORDER_SYNTAX}"
-_PRESETS = ("row-major", "rowmajor", "raster", "serpentine", "snake", "boustrophedon")
+_PRESETS = ("row-major", "rowmajor", "raster", "serpentine", "snake", "boustrophedon",
+            "spiral")
 _PAIR = re.compile(r"\(\s*(-?\d+)\s*,\s*(-?\d+)\s*\)")
 
 
@@ -38,8 +41,10 @@ def parse_scan_order(text: str | None, period: int | None = None, *,
     Parameters
     ----------
     text : str or None
-        A preset name (``row-major``, ``serpentine``), ``'r,c;r,c;...'`` or
-        ``'[(r,c),(r,c),...]'``. None or empty: None (the caller's default).
+        A preset name (``row-major``, ``serpentine``, ``spiral``), ``'r,c;r,c;...'`` or
+        ``'[(r,c),(r,c),...]'`` (zero-based; prefixed ``one-based:`` for one-based phases), or
+        a scan-pattern PNG path (:func:`metasensor.sensor.scan.read_order_png`). None or
+        empty: None (the caller's default).
     period : int or None
         The scan period the order must cover; None or 0: an explicit list sets its own
         (the square root of its length) and a preset name uses ``default_period``.
@@ -61,8 +66,20 @@ def parse_scan_order(text: str | None, period: int | None = None, *,
     try:
         if text.lower() in _PRESETS:
             return check_scan_order(text.lower(), period or default_period)
+        if text.lower().endswith(".png"):  # the authors' scan-pattern image
+            from pathlib import Path
+
+            from metasensor.sensor.scan import read_order_png
+
+            if not Path(text).is_file():
+                raise ValueError(f"scan-pattern file not found: {text}")
+            order = read_order_png(text)
+            return check_scan_order(order, period or period_of(order))
+        base = 0
+        if text.lower().startswith("one-based:"):
+            text, base = text[len("one-based:"):], 1
         try:
-            pairs = _pairs(text)
+            pairs = [(r - base, c - base) for r, c in _pairs(text)]
         except ValueError:
             raise ValueError(f"cannot read {text!r}") from None
         if not pairs:

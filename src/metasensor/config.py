@@ -26,6 +26,7 @@ RANGES = {"mla_pitch": (1e-6, 1e-2), "mla_focal": (1e-6, 1.0), "wavelength": (1e
           "magnification": (1e-6, 1e6)}
 MAX_NNUM = 63  # pixels per lenslet (the prototype: 15)
 MAX_NA = 0.95  # image-side numerical aperture (the prototype: 0.05)
+_MOVING = ("mla", "image")
 
 
 class ConfigError(ValueError):
@@ -61,13 +62,24 @@ class SystemConfig:
     wavelength : centre wavelength [m].
     na : image-side numerical aperture of the main lens, in (0, 1).
     obstruction : central obstruction ratio of the pupil (0: clear; e.g. 0.3 for a Cassegrain).
-    scan : scan period per axis (1 = plain light-field camera); must divide ``nnum``.
+    scan : scan period per axis (1 = plain light-field camera); must divide ``nnum`` when the
+        MLA moves (``moving="mla"``); any period when the image moves over a fixed MLA.
     magnification : lateral magnification of the main lens (object to image), for object-side
         conversions.
     focal_length, focus_distance : main-lens focal length and object focus distance [m]
         (optional; needed only for metric depth).
     sensor_shape : (rows, columns) of the full sensor.
     bit_depth : ADC bits of the raw frames (8, 10, 12, 14 or 16).
+    moving : what moves during a scan: ``"mla"`` (the meta-imaging sensor: the MLA moves over a
+        fixed sensor by ``nnum / scan`` px per step) or ``"image"`` (scanning light-field
+        microscopes: the image moves over a fixed MLA and sensor by ``mla_pitch / scan`` per
+        step, any period; interface.md). The default of ``realign``'s ``moving`` argument.
+
+    Reconstruction grid: views are sampled every ``mla_pitch / scan`` on the image plane; the
+    reconstruction grid subdivides that step into ``d = scan_step_px`` pixels, so its pitch is
+    ``grid_pitch = mla_pitch / (scan·d)``: the sensor pitch when ``scan`` divides ``nnum``, else
+    the coarsest pitch at most the sensor's with an odd ``scan·d`` (so that a grid pixel is
+    centred on every lenslet centre; 13 px lenslets, 3 × 3 scan: d = 5, grid pitch 13/15 px).
     """
 
     nnum: int = 15
@@ -84,6 +96,7 @@ class SystemConfig:
     focus_distance: float | None = None
     sensor_shape: tuple[int, int] = field(default=(6004, 7920))
     bit_depth: int = 12
+    moving: str = "mla"
 
     def __post_init__(self) -> None:
         if isinstance(self.sensor_shape, list):
@@ -133,8 +146,12 @@ class SystemConfig:
             raise ConfigError(f"obstruction must lie in [0, 1), got {self.obstruction!r}")
         if not isinstance(self.scan, int) or isinstance(self.scan, bool) or self.scan < 1:
             raise ConfigError(f"scan must be a positive integer, got {self.scan!r}")
-        if self.nnum % self.scan != 0:
-            raise ConfigError(f"scan period {self.scan} does not divide nnum {self.nnum}")
+        if self.moving not in _MOVING:
+            raise ConfigError(f"moving must be 'mla' or 'image', got {self.moving!r}")
+        if self.moving == "mla" and self.nnum % self.scan != 0:
+            raise ConfigError(f"scan period {self.scan} does not divide nnum {self.nnum}, as a "
+                              f"moving MLA needs (set moving = \"image\" for a system whose "
+                              f"image moves over a fixed MLA)")
         for name in ("focal_length", "focus_distance"):
             if getattr(self, name) is not None:
                 positive(name)
@@ -199,8 +216,27 @@ class SystemConfig:
 
     @property
     def scan_step_px(self) -> int:
-        """Scan step in sensor pixels, d = nnum // scan (also the views' sample spacing)."""
-        return self.nnum // self.scan
+        """Views' sample spacing in reconstruction-grid pixels, d: ``nnum // scan`` (the scan
+        step in sensor pixels) when ``scan`` divides ``nnum``, else the smallest d with
+        ``scan·d >= nnum`` and ``scan·d`` odd (an even scan period then has no such grid)."""
+        if self.nnum % self.scan == 0:
+            return self.nnum // self.scan
+        d = -(-self.nnum // self.scan)
+        return d if (self.scan * d) % 2 else d + 1
+
+    @property
+    def grid_points(self) -> int:
+        """Reconstruction-grid pixels per lenslet pitch and axis, ``scan · d`` (= nnum when
+        ``scan`` divides ``nnum``)."""
+        return self.scan * self.scan_step_px
+
+    @property
+    def grid_pitch(self) -> float:
+        """Pixel pitch of the reconstruction grid [m], ``mla_pitch / (scan · d)``; equals
+        ``pixel_pitch`` when ``scan`` divides ``nnum``."""
+        if self.grid_points == self.nnum:
+            return self.pixel_pitch
+        return self.mla_pitch / self.grid_points
 
     @property
     def pupil_radius_px(self) -> float:
@@ -209,8 +245,10 @@ class SystemConfig:
 
     @property
     def field_offset_px(self) -> int:
-        """Sensor position of reconstruction pixel 0: (nnum - d) // 2 (docs/conventions.md)."""
-        return (self.nnum - self.scan_step_px) // 2
+        """Position of reconstruction pixel 0 in grid pixels from the first pixel of lenslet
+        (0, 0) at phase (0, 0): ``(scan·d − d) // 2`` (= (nnum − d) // 2 when scan divides
+        nnum; docs/conventions.md)."""
+        return (self.grid_points - self.scan_step_px) // 2
 
     def view_mask(self, radius: float | None = None):
         """Boolean (nnum, nnum) mask of the views used for reconstruction.

@@ -32,7 +32,7 @@ DAO_MODES = tuple(range(4, 46))
 
 def shift_scale(cfg: SystemConfig) -> float:
     """Image pixels of view displacement per unit pupil gradient of W (waves): (λ/NA)/pitch."""
-    return cfg.wavelength / cfg.na / cfg.pixel_pitch
+    return cfg.wavelength / cfg.na / cfg.grid_pitch
 
 
 def _modes(modes: Iterable[int], jmax: int) -> np.ndarray:

@@ -6,7 +6,8 @@ Model of :func:`view_psfs`, for every point position s inside the central lensle
 pupil ``P(rho) = A exp(i 2π W)`` -> coherent field at the MLA ``U0(r) = ∫P exp(−i2π(NA/λ)rho·r)``
 (forward transform, so a Noll-2 tilt of c waves moves it by +2cλ/NA along +x; computed once, by
 a matrix Fourier transform, :mod:`metasensor.optics.coherent`) -> the point at s is an integer
-roll of ``U0`` (grid pitch ``dx = pixel_pitch / oversample``) -> times the lenslet array
+roll of ``U0`` (grid pitch ``dx = pixel_pitch / oversample``; a Fourier shift for output grids
+that are not a whole number of samples, ``points``) -> times the lenslet array
 (aperture of ``cfg.lenslet_diameter``, quadratic phase ``exp(-iπ|r - c_m|²/(λ f_ml))``) ->
 angular-spectrum propagation over ``mla_focal`` (FFT) -> ``|.|²`` -> integrate over the sensor
 pixels (sum ``oversample²`` samples) -> regroup pixel (u, v) of lenslet block m into view (u, v)
@@ -184,11 +185,23 @@ def _default_oversample(cfg: SystemConfig, subsample: int) -> int:
     return os_
 
 
+def _check_points(cfg: SystemConfig, points, sub: int) -> int:
+    """Point positions per lenslet and axis (``nnum · subsample`` when None)."""
+    if points is None:
+        return cfg.nnum * sub
+    if isinstance(points, bool) or not isinstance(points, int | np.integer) or points < 3 \
+            or points % 2 == 0:
+        raise ValueError(f"points must be an odd integer >= 3, got {points!r}")
+    if sub != 1:
+        raise ValueError(f"points and subsample {sub} cannot be combined; give one of them")
+    return int(points)
+
+
 # ----------------------------------------------------------------------------- view PSFs
 def view_psfs(cfg: SystemConfig, zernike=None, depth: float = 0.0, *,
               phase: PupilFn | None = None, amplitude=None, subsample: int = 1,
               size: int | None = None, device=None, cache=True,
-              oversample: int | None = None) -> np.ndarray:
+              oversample: int | None = None, points: int | None = None) -> np.ndarray:
     """Phase-space PSF bank ``H[u, v, y, x]`` of every view, float32
     ``(nnum, nnum, K·subsample, K·subsample)``.
 
@@ -216,12 +229,20 @@ def view_psfs(cfg: SystemConfig, zernike=None, depth: float = 0.0, *,
         the pupil amplitude and wavefront evaluated on a fixed 257² grid, depth, subsample, size
         and oversample.
     oversample : simulation samples per pixel per axis (odd multiple of subsample; default >= 3).
+    points : odd number of point positions (and output samples) per lenslet pitch and axis, or
+        None (``nnum · subsample``). Another value samples the bank on a grid of pitch
+        ``mla_pitch / points`` (the reconstruction grid ``cfg.grid_points`` of a scan period
+        that does not divide nnum); ``size`` is then counted on that grid, the lenslets sit
+        every ``points`` samples, and each point carries ``(nnum / points)²`` of a sensor
+        pixel's flux (as with ``subsample``). Needs ``subsample = 1``. Positions between the
+        simulation samples are reached by a Fourier shift of the point's field.
     """
     _check_config(cfg)
     z = _check_zernike(zernike)
     depth = _check_depth(depth)
     sub = _check_odd(subsample, "subsample")
     size = _check_odd(size, "size")
+    npts = _check_points(cfg, points, sub)
     os_ = _check_odd(oversample, "oversample") or _default_oversample(cfg, sub)
     if os_ % sub:
         raise ValueError(f"oversample {os_} must be a multiple of subsample {sub}")
@@ -233,22 +254,26 @@ def view_psfs(cfg: SystemConfig, zernike=None, depth: float = 0.0, *,
     if cache is not False:
         key = _cache.cache_key(PSF_CODE_VERSION, "view_psfs", cfg.optical_digest(),
                                a_ref.astype(np.float32), w_ref.astype(np.float32), depth, sub,
-                               size, os_)
+                               size, os_, *(() if points is None else ("points", npts)))
         hit = _cache.load(key, folder)
         if hit is not None:
             return hit
 
+    grid = npts / (cfg.nnum * sub)  # output samples per pixel/subsample (1 unless ``points``)
     reach = _ray_reach(cfg, gmax) / cfg.pixel_pitch  # the bank spans at least ±reach pixels
-    k_min = size or 2 * int(reach) + 1
+    k_min = size or 2 * int(reach * grid) + 1
     check_memory(4.0 * cfg.nnum**2 * (k_min * sub) ** 2, f"the PSF bank ({cfg.nnum}² views of "
                  f">= {k_min}² px: rays reach {reach:.0f} px, max |∇W| {gmax:.0f} waves/radius)")
     if size is None:
         size = _default_size(cfg, z, depth, phase, amplitude, gmax, dev)
-    lenslets, n = _grid(cfg, size, os_)
+        if points is not None:
+            size = math.ceil(size * grid - 1e-9) | 1
+    lenslets, n = _grid(cfg, math.ceil(size / grid) | 1, os_)
     plan = plan_field(cfg, n, dx, gmax)
     a, w, norm = pupil_samples(cfg, plan, z, depth, phase, amplitude)
     u0 = point_field(cfg, plan, a, w, norm, n, dx, dev)
-    out = _simulate_bank(cfg, u0, os_, sub, lenslets, size, dev)
+    out = _simulate_bank(cfg, u0, os_, npts, lenslets, size * sub if points is None else size,
+                         dev)
     if key is not None:
         _cache.store(key, out, folder)
     return out
@@ -295,9 +320,10 @@ def _batch_size(n: int, npos: int, dev: torch.device) -> int:
     return max(1, min(npos, budget // (n * n * 8 * 3)))
 
 
-def _simulate_bank(cfg, u0: torch.Tensor, os_, sub, lenslets, size, dev) -> np.ndarray:
-    """Bank (nnum, nnum, K·sub, K·sub) from the field ``u0`` (n, n) of a point at the centre of
-    the central lenslet, on a grid of ``lenslets`` lenslets per axis (K = size)."""
+def _simulate_bank(cfg, u0: torch.Tensor, os_, npos, lenslets, kf, dev) -> np.ndarray:
+    """Bank (nnum, nnum, kf, kf) from the field ``u0`` (n, n) of a point at the centre of
+    the central lenslet, on a grid of ``lenslets`` lenslets per axis, for ``npos`` point
+    positions per lenslet pitch (the output grid)."""
     nnum = cfg.nnum
     n = u0.shape[0]
     dx = cfg.pixel_pitch / os_
@@ -305,18 +331,13 @@ def _simulate_bank(cfg, u0: torch.Tensor, os_, sub, lenslets, size, dev) -> np.n
     mla = tile.repeat(lenslets, lenslets)
     hz = torch.as_tensor(_transfer(n, dx, cfg.mla_focal, cfg.wavelength),
                          dtype=torch.complex64, device=dev)
-    npos = nnum * sub  # point positions per axis, s = half − i for i = 0 .. npos − 1
+    # point positions per axis, s = half − i for i = 0 .. npos − 1
     half = npos // 2
-    step = os_ // sub  # grid samples per fine position
-    kf = size * sub
     cf = kf // 2
     # one extra row and column collect the blocks that fall outside the window
     bank = torch.zeros((nnum, nnum, kf + 1, kf + 1), dtype=torch.float32, device=dev)
-    mrange = (np.arange(lenslets) - lenslets // 2) * nnum * sub
-    # U0(r − s) for every s as one strided view of a periodic copy of U0 pre-shifted by
-    # +half·step: position (i, j) (s = (half − i, half − j)) starts at (i·step, j·step)
-    big = torch.roll(u0, (half * step, half * step), (0, 1)).repeat(2, 2).contiguous()
-    shifted = torch.as_strided(big, (npos, npos, n, n), (step * 2 * n, step, 2 * n, 1))
+    mrange = (np.arange(lenslets) - lenslets // 2) * npos
+    shifted = _shifted_fields(u0, nnum * os_, npos)
     rows = max(1, _batch_size(n, npos * npos, dev) // npos)
     offs = half - np.arange(npos)
     from tqdm.auto import tqdm
@@ -340,8 +361,36 @@ def _simulate_bank(cfg, u0: torch.Tensor, os_, sub, lenslets, size, dev) -> np.n
         iy = torch.as_tensor(np.where((iy >= 0) & (iy < kf), iy, kf), device=dev)[:, :, None]
         ix = torch.as_tensor(np.where((ix >= 0) & (ix < kf), ix, kf), device=dev)[:, None, :]
         bank[:, :, iy, ix] = blocks
-    bank = bank[:, :, :kf, :kf] / (sub * sub)
+    bank = bank[:, :, :kf, :kf] * (nnum / npos) ** 2  # a point carries (nnum/npos)² px of flux
     return bank.cpu().numpy()
+
+
+def _shifted_fields(u0: torch.Tensor, per_lenslet: int, npos: int):
+    """``U0(r − s)`` for the ``npos²`` point positions ``s = (half − i, half − j)`` grid
+    samples of ``per_lenslet / npos`` simulation samples each: indexable ``[i0:i1]`` →
+    ``(i1 − i0, npos, n, n)``. An integer step is one strided view of a periodic copy of U0
+    (no copy per position); a fractional one shifts U0 in Fourier space (exact: the periodic
+    field is band-limited to NA/λ, sampled above Nyquist)."""
+    n = u0.shape[0]
+    half = npos // 2
+    if per_lenslet % npos == 0:
+        step = per_lenslet // npos
+        # pre-shifted by +half·step: position (i, j) starts at (i·step, j·step)
+        big = torch.roll(u0, (half * step, half * step), (0, 1)).repeat(2, 2).contiguous()
+        return torch.as_strided(big, (npos, npos, n, n), (step * 2 * n, step, 2 * n, 1))
+    spec = torch.fft.fft2(u0)
+    k = torch.fft.fftfreq(n, device=u0.device, dtype=torch.float64)
+    shifts = (half - torch.arange(npos, device=u0.device, dtype=torch.float64)) \
+        * (per_lenslet / npos)
+    ramp = torch.exp(-2j * math.pi * shifts[:, None] * k[None, :]).to(spec.dtype)  # (npos, n)
+
+    class _Lazy:
+        def __getitem__(self, rows: slice):
+            ry = ramp[rows]  # (b, n)
+            return torch.fft.ifft2(spec[None, None] * ry[:, None, :, None]
+                                   * ramp[None, :, None, :])
+
+    return _Lazy()
 
 
 def _bin(inten: torch.Tensor, k: int) -> torch.Tensor:

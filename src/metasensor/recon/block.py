@@ -80,6 +80,8 @@ def default_psfs(cfg: SystemConfig, zernike, device, size: int | None = None) ->
 
     z = None if zernike is None or not np.any(zernike) else np.asarray(zernike, np.float64)
     kw = {} if size is None else {"size": int(size)}
+    if cfg.grid_points != cfg.nnum:  # a scan period that does not divide nnum: the grid's bank
+        kw["points"] = cfg.grid_points
     return np.asarray(view_psfs(cfg, zernike=z, depth=0.0, device=device, **kw),
                       dtype=np.float32)
 

@@ -10,11 +10,24 @@ import typer
 from metasensor.cli_options import SCAN_ORDER_HELP, SCAN_ORDER_NAMES
 
 
-def _config(config: Path | None, scan: int | None):
+def _config(config: Path | None, scan: int | None, moving: str | None = None):
     from metasensor.config import SystemConfig
 
     cfg = SystemConfig.from_toml(config) if config is not None else SystemConfig()
-    return cfg.replace(scan=scan) if scan is not None and scan != cfg.scan else cfg
+    return _with(cfg, scan, moving)
+
+
+def _with(cfg, scan: int | None, moving: str | None):
+    """``cfg`` with the scan period and what moves given on the command line (validated
+    together: a period that does not divide nnum needs moving = image)."""
+    changes = {}
+    if scan is not None and scan != cfg.scan:
+        changes["scan"] = scan
+    if moving is not None and moving != cfg.moving:
+        if moving not in ("mla", "image"):
+            raise ValueError(f"--moving must be mla or image, got {moving!r}")
+        changes["moving"] = moving
+    return cfg.replace(**changes) if changes else cfg
 
 
 def _order(text: str | None, period: int):
@@ -31,7 +44,8 @@ def calibrate_cmd(
     config: Path | None = typer.Option(None, "--config", help="system configuration TOML"),
     scan: int | None = typer.Option(None, "--scan", help="scan period of a multi-page input"),
     order: str | None = typer.Option(None, *SCAN_ORDER_NAMES, help=SCAN_ORDER_HELP),
-    moving: str = typer.Option("mla", "--moving", help="what moves during the scan: mla|image"),
+    moving: str | None = typer.Option(None, "--moving", help="what moves during the scan: "
+                                      "mla|image (default: the config's moving, else mla)"),
     flat: bool = typer.Option(True, "--flat/--no-flat", help="also write the flat-field map"),
     figure: Path | None = typer.Option(None, "--figure", dir_okay=False,
                                        help="PNG: fitted grid over the frame, offsets against "
@@ -50,7 +64,8 @@ def calibrate_cmd(
     from metasensor.io.raw import open_raw
     from metasensor.sensor.calibrate import calibrate, flat_field
 
-    cfg = _config(config, scan)
+    cfg = _config(config, scan, moving)
+    moving = cfg.moving
     from metasensor.io.guard import guard
 
     flat_path = out.parent / out.with_suffix(".flat.tif").name if flat else None
@@ -100,7 +115,8 @@ def realign_cmd(
                                      help=f"{SCAN_ORDER_HELP} (default: RAW's stored order, "
                                      "else row-major)"),
     moving: str | None = typer.Option(None, "--moving", help="what moves during the scan: "
-                                      "mla|image (default: RAW's stored value, else mla)"),
+                                      "mla|image (default: RAW's stored value, else the "
+                                      "config's moving, else mla)"),
     offsets: str = typer.Option("measure", "--offsets", help="per-frame grid offsets: measure "
                                 "(from each frame), calib (stored), nominal"),
     sliding: bool = typer.Option(False, "--sliding", help="one view stack per frame (a sliding "
@@ -209,14 +225,16 @@ def _stored_settings(raw_path: Path, config, scan, order, moving):
 
     stored = read_config_from_views(raw_path, strict=config is None) if raw_path.is_file() \
         else None
+    extra = stored_extras(raw_path) if raw_path.is_file() else {}
+    if moving is None and extra.get("moving") in ("mla", "image"):
+        moving = extra["moving"]
     if config is None and stored is not None:
-        cfg = stored.replace(scan=scan) if scan is not None else stored
+        cfg = _with(stored, scan, moving)
     else:
-        cfg = _config(config, scan)
+        cfg = _config(config, scan, moving)
     if stored is not None and (config is not None or scan is not None):
         # frames taken with one scan cannot be realigned as another
         check_against_stored(cfg, stored, config if config is not None else "--scan", raw_path)
-    extra = stored_extras(raw_path) if raw_path.is_file() else {}
     used = []
     if config is None and stored is not None:
         used.append("configuration")
@@ -229,10 +247,9 @@ def _stored_settings(raw_path: Path, config, scan, order, moving):
             phases = None  # stored for another period: the default applies
     if phases is None:
         phases = _order(order, cfg.scan)
-    if moving is None:
-        moving = extra.get("moving") if extra.get("moving") in ("mla", "image") else "mla"
-        if "moving" in extra:
-            used.append("moving")
+    if "moving" in extra and moving == extra["moving"]:
+        used.append("moving")
+    moving = cfg.moving
     if used:
         typer.echo(f"using the {', '.join(used)} stored in {raw_path.name}")
     return cfg, phases, moving

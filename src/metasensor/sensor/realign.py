@@ -2,7 +2,9 @@
 
 ``moving="mla"`` (the meta-imaging sensor): at scan phase (r, c) the block of nnum x nnum pixels
 behind lenslet (ly, lx) sits at sensor rows ``ly*nnum + r*d``, columns ``lx*nnum + c*d``
-(d = nnum // period). ``moving="image"``: the blocks stay at ``ly*nnum, lx*nnum``.
+(d = nnum // period, which must divide nnum). ``moving="image"``: the blocks stay at
+``ly*nnum, lx*nnum`` and any period is valid (pure indexing). ``moving=None`` (every function's
+default) takes ``cfg.moving`` (``"mla"`` unless the configuration says otherwise).
 Either way view (u, v) at sample ``(ly*period + r, lx*period + c)`` is pixel (u, v) of that block.
 Frames must already be rectified (:mod:`metasensor.sensor.rectify`): lenslet (0, 0) of phase
 (0, 0) covers pixels ``[0:nnum, 0:nnum]``.
@@ -25,26 +27,36 @@ _DTYPES = {np.dtype(t) for t in ("uint8", "uint16", "uint32", "int8", "int16", "
                                  "uint64", "float32", "float64")}
 
 
-def _geometry(cfg: SystemConfig, moving: str) -> tuple[int, int, int]:
+def _moving(cfg: SystemConfig, moving: str | None) -> str:
     if not isinstance(cfg, SystemConfig):
         raise TypeError(f"cfg must be a SystemConfig, got {type(cfg).__name__}")
+    return cfg.moving if moving is None else moving
+
+
+def _geometry(cfg: SystemConfig, moving: str | None) -> tuple[int, int, int]:
+    moving = _moving(cfg, moving)
     if moving not in _MOVING:
         raise ValueError(f"moving must be 'mla' or 'image', got {moving!r}")
     p = cfg.scan
+    if moving == "mla" and cfg.nnum % p:
+        raise ValueError(f"scan period {p} does not divide nnum {cfg.nnum}, as a moving MLA "
+                         "needs (moving='image' for an image scanned over a fixed MLA)")
     d = cfg.nnum // p
     margin = (p - 1) * d if moving == "mla" else 0
     return p, d, margin
 
 
-def phase_offsets(order, cfg: SystemConfig, moving: str = "mla") -> list[tuple[int, int]]:
+def phase_offsets(order, cfg: SystemConfig, moving: str | None = None
+                  ) -> list[tuple[int, int]]:
     """Nominal block origin (rows, columns) in rectified pixels of every phase of ``order``."""
     p, d, _ = _geometry(cfg, moving)
+    moving = _moving(cfg, moving)
     order = check_scan_order(order, p)
     return [(r * d, c * d) if moving == "mla" else (0, 0) for r, c in order]
 
 
-def lenslet_counts(frame_shape: tuple[int, int], cfg: SystemConfig, moving: str = "mla"
-                   ) -> tuple[int, int]:
+def lenslet_counts(frame_shape: tuple[int, int], cfg: SystemConfig,
+                   moving: str | None = None) -> tuple[int, int]:
     """Lenslets (Ly, Lx) whose blocks are on the sensor at every scan phase."""
     _, _, margin = _geometry(cfg, moving)
     ly = (frame_shape[0] - margin) // cfg.nnum
@@ -98,7 +110,7 @@ def _check_size(shape: tuple[int, ...], cfg: SystemConfig, margin: int) -> None:
         )
 
 
-def realign(frames, cfg: SystemConfig, scan_order=None, moving: str = "mla", *,
+def realign(frames, cfg: SystemConfig, scan_order=None, moving: str | None = None, *,
             out: np.ndarray | None = None, engine: str = "auto",
             dtype=np.float32) -> np.ndarray:
     """Raw frames ``(T, H, W)`` of one scan period → views ``(nnum, nnum, Ly*p, Lx*p)``.
@@ -112,6 +124,7 @@ def realign(frames, cfg: SystemConfig, scan_order=None, moving: str = "mla", *,
     on CUDA) is realigned on its device and a new tensor (of ``dtype``) is returned.
     """
     p, _, margin = _geometry(cfg, moving)
+    moving = _moving(cfg, moving)
     order = check_scan_order(scan_order, p)
     if dtype is not None:
         try:
@@ -163,7 +176,7 @@ def _realign_torch(frames, cfg: SystemConfig, order, moving: str, margin: int):
                               ly, lx)
 
 
-def unrealign(views, cfg: SystemConfig, scan_order=None, moving: str = "mla",
+def unrealign(views, cfg: SystemConfig, scan_order=None, moving: str | None = None,
               frame_shape: tuple[int, int] | None = None, *, engine: str = "auto"
               ) -> np.ndarray:
     """Views ``(nnum, nnum, Ly*p, Lx*p)`` → raw frames ``(T, H, W)``: the exact inverse of
@@ -172,6 +185,7 @@ def unrealign(views, cfg: SystemConfig, scan_order=None, moving: str = "mla",
     ``frame_shape`` defaults to the smallest sensor holding all blocks at every phase.
     """
     p, d, margin = _geometry(cfg, moving)
+    moving = _moving(cfg, moving)
     order = check_scan_order(scan_order, p)
     views = np.asarray(views)
     n = cfg.nnum
@@ -197,7 +211,8 @@ def unrealign(views, cfg: SystemConfig, scan_order=None, moving: str = "mla",
 
 
 def realign_sequence(frames: Iterable[np.ndarray], cfg: SystemConfig, scan_order=None,
-                     moving: str = "mla", *, sliding: bool = True, start_phase: int = 0,
+                     moving: str | None = None, *, sliding: bool = True,
+                     start_phase: int = 0,
                      engine: str = "auto") -> Iterator[np.ndarray]:
     """Realign a long sequence of rectified frames ``(H, W)`` (any iterable: an array, a list,
     a :class:`metasensor.io.raw.RawFrames` stream), yielding view stacks.
@@ -212,6 +227,7 @@ def realign_sequence(frames: Iterable[np.ndarray], cfg: SystemConfig, scan_order
     copy plus 1/T of a realignment per frame). Each yielded array is new.
     """
     p, _, margin = _geometry(cfg, moving)
+    moving = _moving(cfg, moving)
     order = check_scan_order(scan_order, p)
     tp = p * p
     if not isinstance(start_phase, (int, np.integer)) or not 0 <= start_phase < tp:
