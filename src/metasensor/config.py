@@ -29,6 +29,28 @@ MAX_NA = 0.95  # image-side numerical aperture (the prototype: 0.05)
 _MOVING = ("mla", "image")
 
 
+# optics a TOML should set for its own system; missing ones fall back to the prototype's
+FALLBACK_FIELDS = ("mla_pitch", "mla_focal", "wavelength", "na")
+_NOTED: set[str] = set()
+
+
+def _note_fallbacks(path: Path, text: str) -> None:
+    """Say once per file and process, on stderr, which optics ``path`` leaves to the
+    prototype's defaults (a reconstruction with another system's optics looks plausible)."""
+    import sys
+
+    table = tomllib.loads(text)
+    table = table.get("system", table)
+    missing = [k for k in FALLBACK_FIELDS if k not in table]
+    key = str(Path(path).resolve())
+    if missing and key not in _NOTED:
+        _NOTED.add(key)
+        proto = SystemConfig()
+        values = ", ".join(f"{k} = {getattr(proto, k)!r}" for k in missing)
+        print(f"note: {path} does not set {', '.join(missing)}; using the prototype's "
+              f"({values})", file=sys.stderr)
+
+
 class ConfigError(ValueError):
     """An impossible or inconsistent system parameter (one line, naming the parameter)."""
 
@@ -357,9 +379,11 @@ class SystemConfig:
         if not text.strip():
             raise ConfigError(f"config {path} is empty (a [system] table of parameters expected)")
         try:
-            return cls.from_toml_string(text)
+            cfg = cls.from_toml_string(text)
         except ConfigError as exc:
             raise ConfigError(f"config {path}: {exc}") from None
+        _note_fallbacks(path, text)
+        return cfg
 
     def digest(self) -> str:
         """Stable hash of every parameter (for cache keys)."""

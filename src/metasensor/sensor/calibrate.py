@@ -33,6 +33,7 @@ from scipy import fft as sfft
 from scipy import ndimage
 
 from metasensor.sensor.calibration import Calibration
+from metasensor.sensor.checks import lattice_residual
 
 __all__ = ["find_grid", "measure_offsets", "calibrate", "flat_field", "lattice_phase"]
 
@@ -107,10 +108,12 @@ def _crop(img: np.ndarray, min_side: int = 1) -> tuple[np.ndarray, np.ndarray]:
             np.array([y0, x0], float))
 
 
-def _coarse_peaks(img: np.ndarray, nnum: int, pitch_range: tuple[float, float]):
-    h, w = img.shape
+def _coarse_peaks(imgs: list[np.ndarray], nnum: int, pitch_range: tuple[float, float]):
+    """The two lattice peaks of the summed FFT magnitudes of ``imgs`` (same shape)."""
+    h, w = imgs[0].shape
     win = np.outer(np.hanning(h), np.hanning(w))
-    spec = np.abs(sfft.fft2(((img - img.mean()) * win).astype(np.float32), workers=-1))
+    spec = sum(np.abs(sfft.fft2(((img - img.mean()) * win).astype(np.float32), workers=-1))
+               for img in imgs)
     fy = np.fft.fftfreq(h)[:, None]
     fx = np.fft.fftfreq(w)[None, :]
     rad = np.hypot(fy, fx)
@@ -128,15 +131,17 @@ def _coarse_peaks(img: np.ndarray, nnum: int, pitch_range: tuple[float, float]):
     return peaks, floor
 
 
-def _refine(dft: _Dft, g0: np.ndarray, bins: np.ndarray, iters: int = 12) -> np.ndarray:
-    """Newton ascent of ``|F(g)|²`` from the coarse FFT peak (analytic derivatives; each step
-    is one pass over the image). Steps are capped at a quarter bin (gradient direction when
-    the Hessian is not negative definite)."""
+def _refine(dfts: list[_Dft], g0: np.ndarray, bins: np.ndarray, iters: int = 12) -> np.ndarray:
+    """Newton ascent of ``Σ_t |F_t(g)|²`` over the frames' DFTs from the coarse FFT peak
+    (analytic derivatives; each step is one pass over each image). Steps are capped at a
+    quarter bin (gradient direction when the Hessian is not negative definite)."""
     g = np.asarray(g0, float).copy()
     for _ in range(iters):
-        f, df, d2f = dft.derivatives(g)
-        grad = 2 * np.real(np.conj(f) * df)
-        hess = 2 * np.real(np.outer(np.conj(df), df) + np.conj(f) * d2f)
+        grad, hess = np.zeros(2), np.zeros((2, 2))
+        for dft in dfts:
+            f, df, d2f = dft.derivatives(g)
+            grad += 2 * np.real(np.conj(f) * df)
+            hess += 2 * np.real(np.outer(np.conj(df), df) + np.conj(f) * d2f)
         hess = 0.5 * (hess + hess.T)
         if np.all(np.linalg.eigvalsh(hess) < 0):
             step = -np.linalg.solve(hess, grad)
@@ -159,11 +164,16 @@ def lattice_phase(frame: np.ndarray, g: np.ndarray) -> tuple[np.ndarray, float]:
     return np.angle(vals), float(np.abs(vals).mean() / max(dft.norm, 1e-300))
 
 
-def find_grid(frame, nnum: int, pitch_range: tuple[float, float] | None = None) -> dict:
+def find_grid(frame, nnum: int, pitch_range: tuple[float, float] | None = None,
+              stack=None) -> dict:
     """Lenslet grid of one raw frame: ``{"pitch", "rotation" (deg), "point" (row, col) of one
-    lenslet centre near the frame centre, "g" (2 x 2 reciprocal vectors), "contrast"}``.
+    lenslet centre near the frame centre, "g" (2 x 2 reciprocal vectors), "contrast",
+    "strength"}`` (strength: the weaker lattice peak over the median of the spectrum's ring).
 
-    ``pitch_range``: search range of the pitch in px (default ``nnum`` ± 25 %).
+    ``pitch_range``: search range of the pitch in px (default ``nnum`` ± 25 %). ``stack``:
+    optional further frames of the same lattice, possibly translated (the frames of a scan):
+    pitch and rotation then maximise the summed ``|F_t(g)|²`` of all of them (translations
+    change only the phases), the point still comes from ``frame``.
     """
     img = _as_image(frame)
     if min(img.shape) < 3 * nnum:
@@ -171,14 +181,22 @@ def find_grid(frame, nnum: int, pitch_range: tuple[float, float] | None = None) 
                          f"a {nnum}-px lenslet grid (needs at least 3 lenslets per side)")
     crop, origin = _crop(img, 3 * nnum)
     pitch_range = pitch_range or (0.75 * nnum, 1.25 * nnum)
-    ((p1, a1), (p2, a2)), floor = _coarse_peaks(crop, nnum, pitch_range)
+    crops = [crop]
+    for k, other in enumerate(stack or []):
+        other = _as_image(other, f"frame {k}")
+        if other.shape != img.shape:
+            raise ValueError(f"frame {k} has shape {other.shape}, the first {img.shape}")
+        crops.append(_crop(other, 3 * nnum)[0])  # its own lit part (no hard edges)
+    same = [c for c in crops if c.shape == crop.shape]
+    ((p1, a1), (p2, a2)), floor = _coarse_peaks(same, nnum, pitch_range)
     if min(a1, a2) < 8 * floor:
         raise ValueError("no lenslet grid found in the frame (the lattice peaks are not above the "
                          "background: a flat or lens-less frame?)")
-    dft = _Dft(crop)
+    dfts = [_Dft(c) for c in crops]
+    dft = dfts[0]
     bins = 1.0 / np.array(crop.shape, float)
-    g1 = _refine(dft, p1, bins)
-    g2 = _refine(dft, p2, bins)
+    g1 = _refine(dfts, p1, bins)
+    g2 = _refine(dfts, p2, bins)
     # similarity fit: g1 = (sin t, cos t)/P, g2 = (cos t, -sin t)/P
     t1 = math.atan2(g1[0], g1[1])
     t2 = math.atan2(-g2[1], g2[0])
@@ -191,7 +209,8 @@ def find_grid(frame, nnum: int, pitch_range: tuple[float, float] | None = None) 
     point = centre + np.linalg.solve(g, frac) + origin
     point = _brightest_phase(img, point, g, pitch)
     return {"pitch": float(pitch), "rotation": math.degrees(t), "point": point, "g": g,
-            "contrast": float(np.abs(vals).mean() / max(dft.norm, 1e-300))}
+            "contrast": float(np.abs(vals).mean() / max(dft.norm, 1e-300)),
+            "strength": float(min(a1, a2) / floor)}
 
 
 def _brightest_phase(img: np.ndarray, point: np.ndarray, g: np.ndarray, pitch: float):
@@ -299,7 +318,15 @@ def calibrate(white, nnum: int, frames=None, scan: int = 1, scan_order=None,
 
     white = _as_image(white, "white frame")
     order = check_scan_order(scan_order, scan)
-    grid = find_grid(white, nnum, pitch_range)
+    fit_img, stack = white, None
+    if frames is not None and len(frames) > 1:
+        if moving == "image":  # one lattice in every frame: their sum shows it best
+            fit_img = np.sum([_as_image(f, f"frame {k}") for k, f in enumerate(frames)], axis=0)
+        else:  # translated lattices: pitch and rotation from all frames jointly
+            stack = [f for f in frames if f is not white]
+    grid = find_grid(fit_img, nnum, pitch_range, stack=stack)
+    residual, _ = lattice_residual(fit_img, grid["g"], grid["point"])
+    _check_fit(grid["strength"], residual)
     t = math.radians(grid["rotation"])
     s = grid["pitch"] / nnum
     m = s * np.array([[math.cos(t), math.sin(t)], [-math.sin(t), math.cos(t)]])
@@ -328,7 +355,20 @@ def calibrate(white, nnum: int, frames=None, scan: int = 1, scan_order=None,
     return Calibration(nnum=nnum, pitch=grid["pitch"], rotation=grid["rotation"],
                        center=tuple(origin), lenslets=lenslets, sensor_shape=white.shape,
                        scan=scan, moving=moving, scan_order=tuple(order), offsets=offsets,
-                       contrast=grid["contrast"])
+                       contrast=grid["contrast"], peak_strength=round(grid["strength"], 2),
+                       fit_residual=None if not math.isfinite(residual) else round(residual, 4))
+
+
+def _check_fit(strength: float, residual: float) -> None:
+    """Refuse a lattice fit that does not describe the field (module docstring of
+    :mod:`metasensor.sensor.checks`)."""
+    from metasensor.sensor.checks import MAX_RESIDUAL_PX
+
+    if math.isfinite(residual) and residual > MAX_RESIDUAL_PX:
+        raise ValueError(f"untrustworthy lenslet-grid fit: the fitted lattice misses the "
+                         f"lenslets across the field by {residual:.2f} px r.m.s. (lattice peak "
+                         f"{strength:.0f}x the background); calibrate from a white frame, or "
+                         "from more frames (a whole scan period)")
 
 
 def flat_field(white, calib: Calibration) -> np.ndarray:

@@ -42,6 +42,11 @@ class Calibration:
     offsets : measured grid displacement [px] of every phase in ``scan_order`` (``None``: the
         nominal ones were assumed).
     contrast : strength of the lenslet pattern used (lattice-peak over mean, 0..1).
+    peak_strength : the weaker lattice peak over the median of the spectrum around it (the
+        fit's signal; below 8 no grid is found).
+    fit_residual : r.m.s. distance [px] between the lattice points measured in tiles of a few
+        lenslets across the field and the fitted lattice (``None``: too few tiles with lenslet
+        contrast to measure it).
     flat : flat-field map file (TIFF, relative to the TOML file's folder) or ``None``.
     flat_origin : (row, col) lenslet index in the flat-field map of kept lenslet (0, 0).
     """
@@ -57,6 +62,8 @@ class Calibration:
     scan_order: tuple[tuple[int, int], ...] = ((0, 0),)
     offsets: tuple[tuple[float, float], ...] | None = None
     contrast: float = 0.0
+    peak_strength: float = 0.0
+    fit_residual: float | None = None
     flat: str | None = None
     flat_origin: tuple[int, int] = (0, 0)
 

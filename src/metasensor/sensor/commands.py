@@ -170,6 +170,8 @@ def realign_cmd(
                                           for k in range(n_out)]
         guard([raw_path, config, calib_path, _flat_input(calib, calib_path)], names,
               lock=[out])  # one lock for the family of numbered stacks
+        if calib is None:
+            _check_period(raw, cfg, config, raw_path)
         stream = tqdm(raw, total=n_frames, desc="realign", unit="frame")
         if calib is not None:
             from metasensor.sensor.calibrate import adapt
@@ -253,6 +255,20 @@ def _stored_settings(raw_path: Path, config, scan, order, moving):
     if used:
         typer.echo(f"using the {', '.join(used)} stored in {raw_path.name}")
     return cfg, phases, moving
+
+
+def _check_period(raw, cfg, config, raw_path: Path) -> None:
+    """Without a calibration the frames must be rectified with the configured nnum: their
+    measured lenslet period (:func:`metasensor.sensor.checks.lattice_period`) must agree within
+    2 %, or realignment would silently scramble the views."""
+    from metasensor.sensor.checks import PERIOD_TOLERANCE, lattice_period
+
+    got = lattice_period([raw[t] for t in range(min(len(raw), 9))], cfg.nnum)
+    if got is not None and abs(got[0] - cfg.nnum) > PERIOD_TOLERANCE * cfg.nnum:
+        source = config if config is not None else "the default configuration"
+        raise ValueError(f"{raw_path}: the frames' lenslet period measures {got[0]:.2f} px but "
+                         f"nnum is {cfg.nnum} ({source}); set nnum = {round(got[0])} in --config "
+                         "if the lenslets are that size, or give --calib for a grid to rectify")
 
 
 def _round_to(frames, dtype):

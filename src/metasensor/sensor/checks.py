@@ -1,0 +1,140 @@
+"""Sanity checks of raw frames against the configured lenslet grid, and the calibration's
+goodness of fit (hand-written on numpy FFTs: no library measures a lenslet lattice).
+
+- :func:`lattice_period`: the lenslet period of a stack of frames from the sum of their power
+  spectra (shift-invariant, so the frames of an MLA scan add up as well as those of an image
+  scan), with the lattice peak's strength over the spectrum's median in the search ring.
+- :func:`lattice_residual`: how well one lattice (pitch, rotation, point) describes the whole
+  field: the frame is cut into tiles of a few lenslets, each tile's lattice point is measured
+  from the phases of the two lattice components there, and the r.m.s. distance [px] of those
+  points from the model's nearest lattice point is returned (tiles without lenslet contrast,
+  e.g. between sparse beads, are skipped).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy import fft as sfft
+from scipy import ndimage
+
+__all__ = ["lattice_period", "lattice_residual", "PERIOD_TOLERANCE", "MIN_PEAK_STRENGTH",
+           "MAX_RESIDUAL_PX"]
+
+PERIOD_TOLERANCE = 0.02  # realign refuses frames whose period differs more from nnum
+MIN_PEAK_STRENGTH = 12.0  # a lattice peak less prominent than this is not trusted
+MAX_RESIDUAL_PX = 0.3  # calibrate refuses a lattice that misses the field's tiles by more
+_CROP = 512
+_PAD = 4
+
+
+def _power(frame: np.ndarray, side: int) -> np.ndarray:
+    img = np.asarray(frame, dtype=np.float64)
+    h, w = img.shape
+    y0, x0 = max(0, (h - _CROP) // 2), max(0, (w - _CROP) // 2)
+    img = img[y0:y0 + _CROP, x0:x0 + _CROP]
+    win = np.outer(np.hanning(img.shape[0]), np.hanning(img.shape[1]))
+    spec = sfft.rfft2((img - img.mean()) * win, s=(side, side), workers=1)
+    return spec.real**2 + spec.imag**2
+
+
+def _peak(power: np.ndarray, sel: np.ndarray, side: int) -> tuple[np.ndarray, float]:
+    """Sub-bin position (cycles/px) of the largest value of ``power`` in ``sel`` (parabola
+    through the neighbours along each axis) and that value."""
+    k = int(np.argmax(np.where(sel, power, -1.0)))
+    iy, ix = np.unravel_index(k, power.shape)
+    pos = []
+    for axis, i in ((0, iy), (1, ix)):
+        n = power.shape[axis]
+        idx = [(iy, ix)] * 3
+        if axis == 0:
+            idx = [((iy - 1) % n, ix), (iy, ix), ((iy + 1) % n, ix)]
+        elif 0 < ix < n - 1:
+            idx = [(iy, ix - 1), (iy, ix), (iy, ix + 1)]
+        a, b, c = (math.log(max(power[j], 1e-300)) for j in idx)
+        den = a - 2 * b + c
+        pos.append(i + (0.5 * (a - c) / den if den < 0 else 0.0))
+    fy = pos[0] if pos[0] <= side / 2 else pos[0] - side
+    return np.array([fy / side, pos[1] / side]), float(power[iy, ix])
+
+
+def lattice_period(frames, nnum: int, max_frames: int = 9) -> tuple[float, float] | None:
+    """(period [px], peak strength) of the lenslet lattice of ``frames`` ((T, H, W) or a list
+    of (H, W)), searched within ``0.8 .. 1.25 × nnum``; None when the frames are too small
+    (< 4 lenslets per side), differ in shape, hold NaN or infinite values, or hold no lattice
+    peak of prominence >= :data:`MIN_PEAK_STRENGTH`."""
+    frames = [np.asarray(f) for f in list(frames)[:max_frames]]
+    if not frames or min(frames[0].shape) < 4 * nnum or any(
+            f.shape != frames[0].shape or (f.dtype.kind == "f" and not np.isfinite(f).all())
+            for f in frames):
+        return None  # (non-finite frames are refused by realign itself)
+    side = min(_PAD * min(_CROP, max(frames[0].shape)), 2048)
+    power = sum(_power(f, side) for f in frames)
+    fy = np.fft.fftfreq(side)[:, None]
+    fx = np.fft.rfftfreq(side)[None, :]
+    rad = np.hypot(fy, fx)
+    ring = (rad >= 1 / (1.25 * nnum)) & (rad <= 1 / (0.8 * nnum))
+    # prominence over the local background (the scene's own spectrum falls steeply with
+    # frequency and would otherwise win at the ring's low end): ~4 main lobes of the window
+    lobe = 4 * side / min(_CROP, min(frames[0].shape))
+    background = ndimage.uniform_filter(power, size=int(4 * lobe) | 1, mode="wrap")
+    prominence = power / (background + 1e-300 + 1e-12 * float(power.max()))
+    tan = math.tan(math.radians(30))
+    g1, p1 = _peak(prominence, ring & (fx > 0) & (np.abs(fy) < fx * tan), side)
+    g2, p2 = _peak(prominence, ring & (np.abs(fx) < np.abs(fy) * tan), side)
+    strength = min(p1, p2)
+    if strength < MIN_PEAK_STRENGTH:
+        return None
+    return 2.0 / (np.hypot(*g1) + np.hypot(*g2)), float(strength)
+
+
+def _tile_phase(tile: np.ndarray, g: np.ndarray, centre: np.ndarray) -> np.ndarray:
+    """Unwindowed DFT of ``tile`` at the two lattice frequencies ``g`` (coordinates relative to
+    ``centre``): whole lenslets inside the tile add their components with the lattice's phase."""
+    y = np.arange(tile.shape[0]) - centre[0]
+    x = np.arange(tile.shape[1]) - centre[1]
+    return np.array([np.exp(-2j * np.pi * gk[0] * y) @ tile @ np.exp(-2j * np.pi * gk[1] * x)
+                     for gk in g])
+
+
+def lattice_residual(image: np.ndarray, g: np.ndarray, point: np.ndarray,
+                     tile_lenslets: int = 6) -> tuple[float, int]:
+    """(r.m.s. distance [px] of the tiles' measured lattice points from the model lattice
+    ``g`` (2 x 2 reciprocal vectors, cycles/px) through ``point`` (row, col), tiles used).
+    ``image``: the (summed) frame the lattice was fitted to. Tiles are ``tile_lenslets`` model
+    cells per side, cut along the model's cell borders (so that each holds whole lenslets when
+    the model is right); tiles whose lattice amplitude is below a fifth of the strongest tile's
+    are skipped; ``(nan, n)`` when fewer than 3 remain."""
+    g = np.asarray(g, float)
+    point = np.asarray(point, float)
+    a = np.linalg.inv(g)  # columns: the lattice vectors
+    pitch = 1.0 / float(np.hypot(*g[0]))
+    h, w = image.shape
+    span = tile_lenslets * pitch
+    found = []
+    first = point - (np.floor(point / pitch) + 0.5) * pitch  # a cell border near 0
+    for y0 in np.arange(first[0], h - span + 1, span):
+        for x0 in np.arange(first[1], w - span + 1, span):
+            r0, c0 = int(round(y0)), int(round(x0))
+            r1, c1 = int(round(y0 + span)), int(round(x0 + span))
+            if r0 < 0 or c0 < 0:
+                continue
+            tile = np.asarray(image[r0:r1, c0:c1], dtype=np.float64)
+            total = float(tile.sum())
+            if total <= 0:
+                continue
+            centre = np.array([r0 + r1 - 1, c0 + c1 - 1], float) / 2
+            vals = _tile_phase(tile, g, centre - np.array([r0, c0], float))
+            frac = -np.angle(vals) / (2 * np.pi)
+            want = g @ (point - centre)
+            local = centre + a @ (frac + np.round(want - frac))
+            found.append((float(np.abs(vals).mean() / total), local - point))
+    if not found:
+        return float("nan"), 0
+    amp = np.array([f[0] for f in found])
+    keep = amp >= 0.2 * amp.max()
+    if keep.sum() < 3:
+        return float("nan"), int(keep.sum())
+    dev = np.array([f[1] for f, k in zip(found, keep, strict=True) if k])
+    return float(np.sqrt(np.mean(np.sum(dev**2, axis=1)))), int(keep.sum())
