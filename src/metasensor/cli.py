@@ -147,6 +147,9 @@ def main() -> None:
     except RuntimeError as exc:  # corrupt chunks of a store, backend failures: one line
         first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         _fail(first, 1)
+    from metasensor.config import say_fallbacks
+
+    say_fallbacks()  # optics a configuration file left to the prototype: said once
     sys.exit(code if isinstance(code, int) else 0)
 
 

@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-__all__ = ["SystemConfig", "ConfigError"]
+__all__ = ["SystemConfig", "ConfigError", "say_fallbacks"]
 
 _APERTURES = ("circular", "square")
 # physically meaningful ranges (lengths in metres): optical wavelengths from the UV to the
@@ -31,24 +31,37 @@ _MOVING = ("mla", "image")
 
 # optics a TOML should set for its own system; missing ones fall back to the prototype's
 FALLBACK_FIELDS = ("mla_pitch", "mla_focal", "wavelength", "na")
-_NOTED: set[str] = set()
+_PENDING: dict[str, str] = {}  # optical digest -> the note not said yet
+_SAID: set[str] = set()
 
 
-def _note_fallbacks(path: Path, text: str) -> None:
-    """Say once per file and process, on stderr, which optics ``path`` leaves to the
-    prototype's defaults (a reconstruction with another system's optics looks plausible)."""
-    import sys
-
+def _note_fallbacks(path: Path, text: str, cfg: SystemConfig) -> None:
+    """Remember which optics ``path`` leaves to the prototype's defaults (a reconstruction
+    with another system's optics looks plausible); :func:`say_fallbacks` says it once."""
     table = tomllib.loads(text)
     table = table.get("system", table)
     missing = [k for k in FALLBACK_FIELDS if k not in table]
     key = str(Path(path).resolve())
-    if missing and key not in _NOTED:
-        _NOTED.add(key)
+    if missing and key not in _SAID:
+        _SAID.add(key)
         proto = SystemConfig()
         values = ", ".join(f"{k} = {getattr(proto, k)!r}" for k in missing)
-        print(f"note: {path} does not set {', '.join(missing)}; using the prototype's "
-              f"({values})", file=sys.stderr)
+        _PENDING[cfg.optical_digest()] = (f"note: {path} does not set {', '.join(missing)}; "
+                                          f"using the prototype's ({values})")
+
+
+def say_fallbacks(cfg: SystemConfig | None = None) -> None:
+    """Print, once, on stderr, the note of a configuration file read by
+    :meth:`SystemConfig.from_toml` that left optics to the prototype: for ``cfg``'s optics
+    (called where optics are used, e.g. PSF generation), or all pending ones (None; the CLI
+    calls it when a command has finished)."""
+    import sys
+
+    keys = list(_PENDING) if cfg is None else [cfg.optical_digest()]
+    for key in keys:
+        note = _PENDING.pop(key, None)
+        if note is not None:
+            print(note, file=sys.stderr)
 
 
 class ConfigError(ValueError):
@@ -382,7 +395,7 @@ class SystemConfig:
             cfg = cls.from_toml_string(text)
         except ConfigError as exc:
             raise ConfigError(f"config {path}: {exc}") from None
-        _note_fallbacks(path, text)
+        _note_fallbacks(path, text, cfg)
         return cfg
 
     def digest(self) -> str:

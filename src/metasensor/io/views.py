@@ -5,6 +5,12 @@ The TIFF layout is the authors' "meta image" layout (interface.md). The TIFF's I
 level (``SystemConfig.from_json(description)`` reads it back), plus one key ``"metasensor"`` with
 what else the writer knows (``kind``, ``view_shape``, extras). Readers also accept a bare
 configuration and the older layout, which nested it under ``["metasensor"]["config"]``.
+
+TIFF view stacks of uint8/uint16/float32 also carry ImageJ metadata (a second ImageDescription
+tag: a stack of nnum² slices labelled "view u=.. v=..", so that ``tifffile.imread`` keeps
+returning the pages in order; pixel size ``mla_pitch / scan`` in µm, the spacing of a view's
+samples on the image plane), so Fiji, napari and ``tifffile`` read the physical pixel size, and
+the JSON description's ``"metasensor"`` key names the axes ``["u", "v", "y", "x"]``.
 """
 
 from __future__ import annotations
@@ -20,7 +26,7 @@ from metasensor.io.atomic import atomic_path
 from metasensor.io.tiff import TiffReadError, TiffWarnings, read_tiff, truncated, unreadable
 
 __all__ = ["write_views", "read_views", "read_config_from_views", "description",
-           "stored_extras", "check_against_stored"]
+           "stored_extras", "check_against_stored", "view_pixel_size"]
 
 
 def description(cfg: SystemConfig | None, **meta) -> dict:
@@ -51,18 +57,53 @@ def write_views(path: str | Path, views: np.ndarray, cfg: SystemConfig | None = 
 
     views = _check_views(views, cfg, extra)
     path = Path(path)
-    meta = description(cfg, kind="views", view_shape=list(views.shape), **(extra or {}))
+    meta = description(cfg, kind="views", view_shape=list(views.shape),
+                       axes=["u", "v", "y", "x"], **(extra or {}))
+    if cfg is not None:
+        meta["metasensor"].setdefault("pixel_size_m", view_pixel_size(cfg))
     n = views.shape[0]
     if path.suffix.lower() == ".zarr":
         return _write_zarr(path, views, meta)
     if path.suffix.lower() not in (".tif", ".tiff"):
         raise ValueError(f"view stack path must end in .tif, .tiff or .zarr: {path}")
     pages = views.reshape(n * n, *views.shape[2:])
+    extratags, options = _imagej_tags(views, cfg, json.dumps(meta))
     with atomic_path(path) as tmp:
-        tifffile.imwrite(tmp, pages, description=json.dumps(meta), metadata=None,
-                         photometric="minisblack",
-                         bigtiff=pages.nbytes > 2**31)
+        tifffile.imwrite(tmp, pages, metadata=None, photometric="minisblack",
+                         bigtiff=pages.nbytes > 2**31, extratags=extratags, **options)
     return path
+
+
+def view_pixel_size(cfg: SystemConfig) -> float:
+    """Spacing of a view's samples on the image (MLA) plane [m]: ``mla_pitch / scan``."""
+    return cfg.mla_pitch / cfg.scan
+
+
+def _imagej_tags(views: np.ndarray, cfg: SystemConfig | None, text: str
+                 ) -> tuple[list, dict]:
+    """The ImageDescription tags of a view stack: the JSON description first (what
+    ``page.description`` returns: interface.md), then, where ImageJ can hold the stack (uint8,
+    uint16 or float32 under 4 GB), an ImageJ stack description (nnum² slices, so that
+    ``tifffile.imread`` still returns the pages in order, page ``u·nnum + v`` = view (u, v);
+    slice labels "view u=.. v=..", µm units, the image-plane sample spacing as the resolution).
+    Returns (extratags, more tifffile.imwrite keywords)."""
+    import tifffile
+
+    tags = [(270, "s", 0, text, True)]
+    if views.dtype not in (np.uint8, np.uint16, np.float32) or views.nbytes > 2**32 - 2**25:
+        return tags, {}
+    n, _, h, w = views.shape
+    meta: dict = {"axes": "ZYX"}
+    options: dict = {}
+    if cfg is not None:
+        um = view_pixel_size(cfg) * 1e6
+        meta.update(unit="um")
+        options = {"resolution": (1.0 / um, 1.0 / um), "resolutionunit": 1}
+    tags.append((270, "s", 0, tifffile.imagej_description((n * n, h, w), **meta), True))
+    labels = {"Labels": [f"view u={u} v={v}" for u in range(n) for v in range(n)],
+              "Info": f"metasensor view stack: slice u*{n}+v = view (u, v); axes (u, v, y, x)"}
+    tags += [(*t[:4], True) for t in tifffile.imagej_metadata_tag(labels, "<")]
+    return tags, options
 
 
 def _write_zarr(path: Path, views: np.ndarray, meta: dict) -> Path:
@@ -135,6 +176,8 @@ def read_views(path: str | Path, nnum: int | None = None, mmap: bool = False) ->
         raise ValueError(f"{path}: not a readable TIFF view stack (no image data)")
     if pages.ndim == 2:
         pages = pages[None]
+    elif pages.ndim == 4:  # an ImageJ hyperstack (T = u, Z = v): the same pages
+        pages = pages.reshape(-1, *pages.shape[2:])
     if pages.ndim != 3:
         raise ValueError(f"{path}: expected a stack of 2-D pages, got shape {pages.shape}")
     if nnum is None:
@@ -196,6 +239,8 @@ def _stored_meta(path: Path) -> dict | None:
                 utf8 = _utf8_description(tif)
         except Exception as exc:
             detail = warned.messages[0] if warned.messages else f"{type(exc).__name__}: {exc}"
+            if _first_ifd_cut(path):
+                raise truncated(path, detail) from None
             raise unreadable(path, detail) from None
         if warned.messages:  # page 0's tags cut short: its description cannot be trusted
             raise truncated(path, warned.messages[0])
@@ -228,6 +273,26 @@ def _utf8_description(tif) -> bool:
     except Exception:  # noqa: BLE001 - unreadable bytes: the description stands as decoded
         return True
     return True
+
+
+def _first_ifd_cut(path: Path) -> bool:
+    """True for a classic TIFF whose first IFD starts inside the file but does not end there
+    (a file cut inside page 0's tags), as opposed to a file that is no TIFF at all."""
+    import struct
+
+    size = path.stat().st_size
+    with open(path, "rb") as fh:
+        head = fh.read(10)
+    if len(head) < 8 or head[:4] not in (b"II*\x00", b"MM\x00*"):
+        return False
+    order = "<" if head[:2] == b"II" else ">"
+    offset = struct.unpack(order + "I", head[4:8])[0]
+    if not 8 <= offset < size:
+        return False
+    with open(path, "rb") as fh:
+        fh.seek(offset)
+        count = fh.read(2)
+    return len(count) < 2 or offset + 2 + 12 * struct.unpack(order + "H", count)[0] + 4 > size
 
 
 def read_config_from_views(path: str | Path, strict: bool = True) -> SystemConfig | None:

@@ -38,7 +38,7 @@ import numpy as np
 import torch
 
 from metasensor.backend import check_memory, resolve_device
-from metasensor.config import SystemConfig
+from metasensor.config import SystemConfig, say_fallbacks
 from metasensor.optics import cache as _cache
 from metasensor.optics.coherent import (
     binned_intensity_mft,
@@ -238,6 +238,7 @@ def view_psfs(cfg: SystemConfig, zernike=None, depth: float = 0.0, *,
         simulation samples are reached by a Fourier shift of the point's field.
     """
     _check_config(cfg)
+    say_fallbacks(cfg)
     z = _check_zernike(zernike)
     depth = _check_depth(depth)
     sub = _check_odd(subsample, "subsample")
@@ -419,6 +420,7 @@ def widefield_psf(cfg: SystemConfig, zernike=None, depth: float = 0.0, sampling=
     :func:`view_psfs`. ``size`` None: smallest odd K keeping >= 99.5 % of the energy.
     """
     _check_config(cfg)
+    say_fallbacks(cfg)
     z = _check_zernike(zernike)
     depth = _check_depth(depth)
     size = _check_odd(size, "size")
