@@ -14,7 +14,8 @@ import numpy as np
 from metasensor.config import ConfigError, SystemConfig
 from metasensor.io.atomic import atomic_path
 
-__all__ = ["save_psf", "load_psf", "plot_views", "parse_zernike", "read_npy"]
+__all__ = ["save_psf", "load_psf", "plot_views", "parse_zernike", "read_npy", "load_matlab_psf",
+           "is_matlab_psf"]
 
 
 def read_npy(path: str | Path, what: str) -> np.ndarray:
@@ -169,3 +170,68 @@ def plot_views(psf: np.ndarray, cfg: SystemConfig, path: str | Path, title: str 
         fig.savefig(tmp, dpi=110, format="png")
     plt.close(fig)
     return path
+
+
+# ----------------------------------------------------------------------------- authors' files
+_MATLAB_NAME = "psf_z"
+_OVERSAMPLE_NAMES = ("oversample", "OSR", "osr", "upsampling")
+
+
+def is_matlab_psf(path: str | Path) -> bool:
+    """True for an HDF5 (MATLAB v7.3) file holding the authors' PSF variable ``psf_z``."""
+    import h5py
+
+    try:
+        with h5py.File(path, "r") as f:
+            return _MATLAB_NAME in f and "psf" not in f
+    except OSError:
+        return False
+
+
+def load_matlab_psf(path: str | Path, nnum: int | None = None,
+                    oversample: int | None = None) -> np.ndarray:
+    """The authors' PSF file (MATLAB v7.3 = HDF5, variable ``psf_z`` of MATLAB size
+    ``(y, x, u, v)``) as a bank ``[u, v, y, x]`` float32 on the pixel grid.
+
+    MATLAB stores arrays column-major, so h5py reads ``psf_z`` with its axes reversed,
+    ``(v, u, x, y)``; they are put back to ``(u, v, y, x)``. ``oversample``: point positions
+    per pixel of an oversampled file (None: a scalar variable ``oversample``/``OSR`` in the file,
+    else 1); the pixel-grid bank is the sub-lattice through the centre sample, times
+    ``oversample²`` (the ``view_psfs(subsample=)`` convention: a fine point carries
+    1/oversample² of a pixel's flux), cropped to an odd size. ``nnum``: checked against the
+    file's view axes when given.
+    """
+    import h5py
+
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"PSF file not found: {path}")
+    try:
+        with h5py.File(path, "r") as f:
+            if _MATLAB_NAME not in f:
+                raise ValueError(f"{path}: no variable '{_MATLAB_NAME}' (not an authors' PSF "
+                                 "file)")
+            raw = np.asarray(f[_MATLAB_NAME], dtype=np.float32)
+            if oversample is None:
+                found = [n for n in _OVERSAMPLE_NAMES if n in f]
+                oversample = int(np.ravel(f[found[0]][()])[0]) if found else 1
+    except OSError as exc:
+        raise ValueError(f"{path}: not a readable HDF5 (MATLAB v7.3) file ({exc})") from None
+    if raw.ndim != 4 or raw.shape[0] != raw.shape[1]:
+        raise ValueError(f"{path}: {_MATLAB_NAME} must be 4-D (y, x, u, v) with nnum x nnum "
+                         f"views, got h5py shape {raw.shape}")
+    bank = raw.transpose(1, 0, 3, 2)  # (v, u, x, y) -> (u, v, y, x)
+    if nnum is not None and bank.shape[0] != nnum:
+        raise ValueError(f"{path}: {bank.shape[0]} x {bank.shape[1]} views, nnum is {nnum}")
+    if not np.isfinite(bank).all():
+        raise ValueError(f"{path}: {_MATLAB_NAME} contains NaN or infinite values")
+    s = int(oversample)
+    if s < 1:
+        raise ValueError(f"{path}: oversample must be >= 1, got {oversample}")
+    cy, cx = bank.shape[2] // 2, bank.shape[3] // 2  # the point's sample
+    if s > 1:
+        bank = bank[:, :, cy % s::s, cx % s::s] * np.float32(s * s)
+        cy, cx = cy // s, cx // s
+    h = min(cy, cx, bank.shape[2] - 1 - cy, bank.shape[3] - 1 - cx)  # odd window, centred
+    return np.ascontiguousarray(bank[:, :, cy - h:cy + h + 1, cx - h:cx + h + 1],
+                                dtype=np.float32)

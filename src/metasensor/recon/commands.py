@@ -14,9 +14,13 @@ __all__ = ["register", "read_psf_file", "write_outputs"]
 def read_psf_file(path: Path, with_attrs: bool = False):
     """PSF bank (nnum, nnum, K, K) and its SystemConfig from a ``metasensor psf`` HDF5 file
     (:func:`metasensor.optics.psf_io.load_psf`), plus its attributes if ``with_attrs``; refuses
-    banks sampled finer than the pixels."""
-    from metasensor.optics.psf_io import load_psf
+    banks sampled finer than the pixels. An authors' MATLAB v7.3 file (``psf_z``) gives the
+    bank on the pixel grid and no configuration (None)."""
+    from metasensor.optics.psf_io import is_matlab_psf, load_matlab_psf, load_psf
 
+    if is_matlab_psf(path):  # the authors' psf_z (MATLAB v7.3): no configuration inside
+        bank = load_matlab_psf(path)
+        return (bank, None, {"source": "matlab"}) if with_attrs else (bank, None)
     bank, cfg, attrs = load_psf(path, with_attrs=True)
     if int(np.ravel(attrs.get("subsample", 1))[0]) != 1:
         raise ValueError(f"{path}: PSF bank sampled at pixel_pitch/{attrs['subsample']}; "
@@ -215,6 +219,11 @@ def register(app: typer.Typer) -> None:
         stored = read_config_from_views(views, strict=config is None and psf is None)
         if config is not None:
             cfg = SystemConfig.from_toml(config)
+        if cfg is None and psf is not None:  # a bank without a configuration (authors' file)
+            cfg = stored
+            if cfg is not None and bank.shape[0] != cfg.nnum:
+                raise ValueError(f"{psf}: {bank.shape[0]} x {bank.shape[0]} views, but {views} "
+                                 f"has nnum {cfg.nnum}")
         if psf is not None and stored is not None and cfg.nnum != stored.nnum:
             raise ValueError(f"{psf}: PSF bank made for nnum {cfg.nnum}, but {views} has nnum "
                              f"{stored.nnum}")

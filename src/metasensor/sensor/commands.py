@@ -106,8 +106,9 @@ def calibrate_cmd(
 def realign_cmd(
     raw_path: Path = typer.Argument(..., metavar="RAW", help="raw frames, multi-page TIFF"),
     out: Path = typer.Option(..., "--out", "-o", help="view stack(s) to write (.tif or .zarr)"),
-    calib_path: Path | None = typer.Option(None, "--calib", help="calibration TOML (none: "
-                                           "frames are already rectified)"),
+    calib_path: Path | None = typer.Option(None, "--calib", help="calibration TOML, or a "
+                                           "napari-LF .lfc file (none: frames are already "
+                                           "rectified)"),
     config: Path | None = typer.Option(None, "--config", help="system configuration TOML "
                                        "(default: the one stored in RAW's description, if any)"),
     scan: int | None = typer.Option(None, "--scan", help="scan period (default: config's)"),
@@ -141,7 +142,6 @@ def realign_cmd(
 
     from metasensor.io.raw import open_raw
     from metasensor.io.views import write_views
-    from metasensor.sensor.calibration import Calibration
     from metasensor.sensor.realign import realign_sequence
     from metasensor.sensor.rectify import check_fits, rectify_frames
 
@@ -158,6 +158,7 @@ def realign_cmd(
     cfg, phases, moving = _stored_settings(raw_path, config, scan, order, moving)
     tp = len(phases)
     with open_raw(raw_path) as raw:
+        calib = _read_calib(calib_path, cfg, raw.shape[1:])
         n_frames = len(raw)
         if n_frames < tp:
             raise ValueError(f"{raw_path}: {n_frames} frames but one {cfg.scan}x{cfg.scan} scan "
@@ -255,6 +256,19 @@ def _stored_settings(raw_path: Path, config, scan, order, moving):
     if used:
         typer.echo(f"using the {', '.join(used)} stored in {raw_path.name}")
     return cfg, phases, moving
+
+
+def _read_calib(path: Path | None, cfg, sensor_shape):
+    """The calibration of ``--calib``: this package's TOML, or a napari-LF ``.lfc`` file."""
+    from metasensor.sensor.calibration import Calibration
+
+    if path is None:
+        return None
+    if path.suffix.lower() == ".lfc":
+        from metasensor.sensor.lfc import read_lfc
+
+        return read_lfc(path, nnum=cfg.nnum, sensor_shape=tuple(sensor_shape))
+    return Calibration.from_toml(path)
 
 
 def _check_period(raw, cfg, config, raw_path: Path) -> None:

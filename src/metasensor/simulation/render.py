@@ -42,17 +42,17 @@ class Lattice:
 
 
 def fft_size(n: int, multiple: int) -> int:
-    """Smallest 5-smooth integer >= n that is a multiple of ``multiple``."""
-    m = max(n, multiple)
+    """Smallest ``multiple · k >= n`` with k 5-smooth (a 5-smooth size when ``multiple`` is
+    one; a stride with another prime factor, e.g. 13, has no 5-smooth multiple)."""
+    k = max(1, -(-n // multiple))
     while True:
-        if m % multiple == 0:
-            k = m
-            for p in (2, 3, 5):
-                while k % p == 0:
-                    k //= p
-            if k == 1:
-                return m
-        m += 1
+        r = k
+        for p in (2, 3, 5):
+            while r % p == 0:
+                r //= p
+        if r == 1:
+            return multiple * k
+        k += 1
 
 
 def _plan(count: int, stride: int, c: int, tile: int) -> tuple[int, int]:
