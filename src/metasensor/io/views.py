@@ -57,8 +57,8 @@ def write_views(path: str | Path, views: np.ndarray, cfg: SystemConfig | None = 
 
     views = _check_views(views, cfg, extra)
     path = Path(path)
-    meta = description(cfg, kind="views", view_shape=list(views.shape),
-                       axes=["u", "v", "y", "x"], **(extra or {}))
+    meta = description(cfg, **{"kind": "views", "view_shape": list(views.shape),
+                                "axes": ["u", "v", "y", "x"], **(extra or {})})
     if cfg is not None:
         meta["metasensor"].setdefault("pixel_size_m", view_pixel_size(cfg))
     n = views.shape[0]
