@@ -52,7 +52,8 @@ def _check_views(views: np.ndarray, cfg=None, extra=None) -> np.ndarray:
 
 def write_views(path: str | Path, views: np.ndarray, cfg: SystemConfig | None = None,
                 extra: dict | None = None) -> Path:
-    """Write a view stack ``(nnum, nnum, H, W)`` to ``.tif``/``.tiff`` or ``.zarr`` atomically."""
+    """Write a view stack ``(nnum, nnum, H, W)`` to ``.tif``/``.tiff``, ``.zarr`` or
+    ``.ome.zarr`` (OME-NGFF, :mod:`metasensor.io.omezarr`) atomically."""
     import tifffile
 
     views = _check_views(views, cfg, extra)
@@ -62,6 +63,10 @@ def write_views(path: str | Path, views: np.ndarray, cfg: SystemConfig | None = 
     if cfg is not None:
         meta["metasensor"].setdefault("pixel_size_m", view_pixel_size(cfg))
     n = views.shape[0]
+    from metasensor.io.omezarr import is_ome_zarr, write_ome_zarr
+
+    if is_ome_zarr(path):
+        return write_ome_zarr(path, views, None if cfg is None else view_pixel_size(cfg), meta)
     if path.suffix.lower() == ".zarr":
         return _write_zarr(path, views, meta)
     if path.suffix.lower() not in (".tif", ".tiff"):
@@ -162,6 +167,10 @@ def read_views(path: str | Path, nnum: int | None = None, mmap: bool = False) ->
     path = Path(path)
     if not path.exists():
         raise FileNotFoundError(f"view stack not found: {path}")
+    from metasensor.io.omezarr import is_ome_zarr, read_ome_zarr
+
+    if is_ome_zarr(path):
+        return read_ome_zarr(path)[0]
     if path.suffix.lower() == ".zarr":
         arr = _open_zarr(path)
         if arr.ndim != 4:
@@ -229,7 +238,11 @@ def _stored_meta(path: Path) -> dict | None:
     (ValueError for a file that is not a readable TIFF)."""
     import tifffile
 
-    if path.suffix.lower() == ".zarr":
+    from metasensor.io.omezarr import is_ome_zarr, read_ome_zarr
+
+    if is_ome_zarr(path):
+        meta = read_ome_zarr(path)[1]
+    elif path.suffix.lower() == ".zarr":
         meta = dict(_open_zarr(path).attrs)
     else:
         warned = TiffWarnings()  # tifffile's logged warnings: kept off stderr, named here
