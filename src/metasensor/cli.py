@@ -38,6 +38,8 @@ _COMMANDS: dict[str, tuple[str, str]] = {
     "demo": ("report.commands", "Simulate the built-in resolution chart through a cheap single "
              "lens, reconstruct it, and write a report (PNG figures, index.html, summary.json); "
              "or run one of the paper's experiments with --scenario."),
+    "info": ("io.info", "Print what a file holds: kind, shape, axes, units, configuration, "
+             "provenance."),
 }
 _COMMAND_MODULES = tuple(dict.fromkeys(module for module, _ in _COMMANDS.values()))
 

@@ -52,3 +52,36 @@ def test_ome_zarr_view_stack_validates_and_round_trips(tmp_path):
     assert got.shape == views.shape and np.array_equal(np.asarray(got), views)
     assert read_config_from_views(path) == CFG
     assert stored_extras(path)["moving"] == "image"
+
+
+def test_info_names_kind_shape_axes_units_and_configuration(tmp_path):
+    from typer.testing import CliRunner
+
+    from metasensor.cli import app
+
+    views = np.zeros((13, 13, 4, 5), np.float32)
+    write_views(tmp_path / "v.tif", views, CFG, extra={"source": "raw.tif"})
+    res = CliRunner().invoke(app, ["info", str(tmp_path / "v.tif")])
+    assert res.exit_code == 0, res.output
+    out = res.output
+    for want in ("kind: views", "shape: (169, 4, 5)", "axes: ['u', 'v', 'y', 'x']",
+                 f"pixel size: {UM:.4g} um", "nnum = 13", "moving = image", "source: raw.tif"):
+        assert want in out, (want, out)
+    CFG.to_toml(tmp_path / "c.toml")
+    res = CliRunner().invoke(app, ["info", str(tmp_path / "c.toml")])
+    assert "kind: system configuration" in res.output and "scan = 3" in res.output
+
+
+def test_provenance_records_version_command_checksums_and_settings(tmp_path, monkeypatch):
+    import hashlib
+    import sys
+
+    from metasensor.io.provenance import provenance
+
+    (tmp_path / "a.tif").write_bytes(b"abc")
+    monkeypatch.setattr(sys, "argv", ["/x/metasensor", "reconstruct", "a.tif"])
+    p = provenance({"views": tmp_path / "a.tif", "psf": None}, {"blocks": "2x2"})
+    assert p["command"] == ["metasensor", "reconstruct", "a.tif"] and p["version"]
+    assert p["inputs"] == {"views": {"path": str(tmp_path / "a.tif"),
+                                     "sha256": hashlib.sha256(b"abc").hexdigest()}}
+    assert p["settings"] == {"blocks": "2x2"}

@@ -28,7 +28,8 @@ def read_psf_file(path: Path, with_attrs: bool = False):
     return (bank, cfg, attrs) if with_attrs else (bank, cfg)
 
 
-def write_outputs(out: Path, rec, views, origin=None) -> list[Path]:
+def write_outputs(out: Path, rec, views, origin=None, provenance: dict | None = None
+                  ) -> list[Path]:
     """image.tif (float32, config JSON in the description), zernike.npy, summary.json and a PNG.
     ``origin``: the views' stored sensor origin (realign's), recorded with the image."""
     import matplotlib
@@ -56,7 +57,11 @@ def write_outputs(out: Path, rec, views, origin=None) -> list[Path]:
                "registration_px": rec.registration,
                "registration_zernike": (None if rec.registration_zernike is None
                                         else rec.registration_zernike.tolist())}
-    atomic_write_text(out / "summary.json", json.dumps(summary, indent=1))
+    if rec.method in ("wave", "geometric"):  # DAO: the estimated wavefront of every block
+        summary["zernike_per_block"] = np.asarray(rec.zernike).tolist()
+    if provenance is not None:
+        summary["provenance"] = provenance
+    atomic_write_text(out / "summary.json", json.dumps(summary, indent=1, default=str))
     c = rec.config.center
     d = rec.config.scan_step_px
     f = _preview_factor(image.shape)  # a sensor-sized field is drawn block-averaged
@@ -283,7 +288,16 @@ def register(app: typer.Typer) -> None:
             z = np.asarray(psf_attrs.get("zernike", ()), dtype=np.float64).ravel()
             if z.size and np.isfinite(z).all():
                 rec.zernike = np.zeros(rec.zernike.shape[:2] + (z.size,), np.float32) + z
-        written = [out / p.name for p in write_outputs(staged.path, rec, stack, origin)]
+        from metasensor.io.provenance import provenance as _provenance
+
+        prov = _provenance({"views": views, "psf": psf, "config": config, "system": system,
+                            "field_zernike": field_zernike},
+                           {"method": method, "blocks": blocks, "overlap": overlap,
+                            "solver": solver, "iterations": iterations, "subsets": subsets,
+                            "view_radius": view_radius, "zernike": zernike,
+                            "config": cfg.to_dict()})
+        written = [out / p.name for p in write_outputs(staged.path, rec, stack, origin,
+                                                       provenance=prov)]
         staged.commit()
         if target is not None:
             import zarr
