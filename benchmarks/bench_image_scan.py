@@ -8,9 +8,10 @@ over a fixed MLA by 13/3 px per step, the spiral order, one-based rows 3,2,1,1,1
 ``simulation.image_scan.simulate_image_scan``, written as raw frames without metadata, and taken
 through the command line alone: ``calibrate`` (all 9 frames) -> ``realign --calib`` ->
 ``reconstruct``, with the optics from a TOML. Both reconstructions: ISA with the default solver,
-one block; SSIM / PSNR against each system's own truth on its own reconstruction grid (15 px per
-lenslet for both: 4.6 µm and 4.6 µm·13/13... the prototype's sensor grid; 13/15 px of the
-13-px sensor), its data range, cropping one lenslet at the border.
+one block; SSIM / PSNR against each system's own truth on its own reconstruction grid (15 grid
+pixels per lenslet for both, so the same 4.6 µm grid: the prototype's sensor pixels, 13/15 of
+the 13-px system's), with its data range, cropping one lenslet at the border. The chart is
+rendered over the same physical field for both (the 13-px sensor has 13/15 as many pixels).
 """
 
 from __future__ import annotations
@@ -68,7 +69,7 @@ def image_scan(lenslets: int, folder: Path) -> dict:
     cfg = ms.SystemConfig(nnum=13, scan=3, moving="image", mla_pitch=69e-6, mla_focal=690e-6,
                           wavelength=525e-9, na=0.05)
     s = fine_factor(cfg)
-    size = int(round((lenslets * 15 + 10) * 15 / 13 * s))  # the prototype's field
+    size = int(round((lenslets * 15 + 10) * 13 / 15 * s))  # the prototype's field
     cap = simulate_image_scan(load_scene("chart", size), cfg, scan_order(3, "spiral"),
                               snr_db=30, seed=1)
     cfg.to_toml(folder / "cfg.toml")
