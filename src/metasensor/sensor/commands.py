@@ -154,7 +154,6 @@ def realign_cmd(
     from metasensor.io.guard import guard
 
     guard([raw_path, config, calib_path], [out], lock=False)
-    calib = Calibration.from_toml(calib_path) if calib_path is not None else None
     cfg, phases, moving = _stored_settings(raw_path, config, scan, order, moving)
     tp = len(phases)
     with open_raw(raw_path) as raw:
