@@ -67,6 +67,8 @@ def test_info_names_kind_shape_axes_units_and_configuration(tmp_path):
     for want in ("kind: views", "shape: (169, 4, 5)", "axes: ['u', 'v', 'y', 'x']",
                  f"pixel size: {UM:.4g} um", "nnum = 13", "moving = image", "source: raw.tif"):
         assert want in out, (want, out)
+    res = CliRunner().invoke(app, ["info", str(tmp_path / "v.tif"), "-o", str(tmp_path / "i.txt")])
+    assert res.exit_code == 0 and "kind: views" in (tmp_path / "i.txt").read_text()
     CFG.to_toml(tmp_path / "c.toml")
     res = CliRunner().invoke(app, ["info", str(tmp_path / "c.toml")])
     assert "kind: system configuration" in res.output and "scan = 3" in res.output

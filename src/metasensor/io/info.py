@@ -130,12 +130,23 @@ def describe(path: str | Path) -> list[str]:
     raise ValueError(f"{path}: not a file metasensor knows (TIFF, Zarr, HDF5, TOML, JSON)")
 
 
-def info_cmd(path: Path = typer.Argument(..., help="a file metasensor reads or writes")) -> None:
+def info_cmd(
+    path: Path = typer.Argument(..., help="a file metasensor reads or writes"),
+    out: Path | None = typer.Option(None, "--out", "-o", dir_okay=False,
+                                    help="also write the description to this text file"),
+) -> None:
     """Print what a file holds: kind, shape, axes, units, configuration, provenance.
 
     Example: metasensor info views.tif
     """
-    for line in describe(path):
+    lines = describe(path)
+    if out is not None:
+        from metasensor.io.atomic import atomic_write_text
+        from metasensor.io.guard import guard
+
+        guard([path], [out])
+        atomic_write_text(out, "\n".join(lines) + "\n")
+    for line in lines:
         typer.echo(line)
 
 
