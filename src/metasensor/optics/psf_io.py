@@ -184,8 +184,8 @@ def is_matlab_psf(path: str | Path) -> bool:
     try:
         with h5py.File(path, "r") as f:
             return _MATLAB_NAME in f and "psf" not in f
-    except OSError:
-        return False
+    except Exception:  # noqa: BLE001 - h5py raises several kinds for damaged files: the
+        return False  # metasensor reader then names the file and the problem
 
 
 def load_matlab_psf(path: str | Path, nnum: int | None = None,
@@ -215,7 +215,7 @@ def load_matlab_psf(path: str | Path, nnum: int | None = None,
             if oversample is None:
                 found = [n for n in _OVERSAMPLE_NAMES if n in f]
                 oversample = int(np.ravel(f[found[0]][()])[0]) if found else 1
-    except OSError as exc:
+    except (OSError, RuntimeError, KeyError) as exc:
         raise ValueError(f"{path}: not a readable HDF5 (MATLAB v7.3) file ({exc})") from None
     if raw.ndim != 4 or raw.shape[0] != raw.shape[1]:
         raise ValueError(f"{path}: {_MATLAB_NAME} must be 4-D (y, x, u, v) with nnum x nnum "

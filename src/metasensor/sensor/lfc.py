@@ -74,7 +74,7 @@ def read_lfc(path: str | Path, nnum: int | None = None,
             ns, nt = (int(geo.attrs.get(k, 0)) for k in ("ns", "nt"))
             if sensor_shape is None and "radiometry" in f and "radiometry" in f["radiometry"]:
                 sensor_shape = tuple(int(v) for v in f["radiometry"]["radiometry"].shape[:2])
-    except OSError as exc:
+    except (OSError, RuntimeError, KeyError) as exc:
         raise ValueError(f"{path}: not a readable HDF5 calibration ({exc})") from None
     if nnum is None:
         if nu != nv or nu < 3 or nu % 2 == 0:
