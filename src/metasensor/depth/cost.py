@@ -28,6 +28,7 @@ import torch
 __all__ = ["CostVolume", "pad_views"]
 
 _HALVES = ("top", "bottom", "left", "right")
+COSTS = ("anchored", "variance", "sad")
 
 
 def pad_views(views: torch.Tensor, pad: int) -> torch.Tensor:
@@ -66,8 +67,8 @@ class CostVolume:
 
     def __init__(self, views: torch.Tensor, au, av, centre: int, max_disparity: float,
                  cost: str = "variance", occlusion: bool = False) -> None:
-        if cost not in ("variance", "sad"):
-            raise ValueError(f"cost must be 'variance' or 'sad', got {cost!r}")
+        if cost not in COSTS:
+            raise ValueError(f"cost must be one of {COSTS}, got {cost!r}")
         self.au = np.asarray(au, dtype=np.float64)
         self.av = np.asarray(av, dtype=np.float64)
         if views.ndim != 3 or views.shape[0] != self.au.size or self.av.size != self.au.size:
@@ -113,7 +114,7 @@ class CostVolume:
         h, w = self.shape
         dev = self.padded.device
         s1 = torch.zeros((9, h, w), dtype=torch.float32, device=dev)
-        s2 = torch.zeros((9, h, w), dtype=torch.float32, device=dev) if self.cost == "variance" \
+        s2 = torch.zeros((9, h, w), dtype=torch.float32, device=dev) if self.cost != "sad" \
             else None
         out = torch.empty((h, w), dtype=torch.float32, device=dev)
         tmp = torch.empty((h + 1, w), dtype=torch.float32, device=dev)
@@ -123,7 +124,7 @@ class CostVolume:
         for i in range(self.au.size):
             self.shifted(i, disparity * self.au[i], disparity * self.av[i], out, tmp)
             g = self.sector[i]
-            if self.cost == "variance":
+            if self.cost != "sad":
                 s1[g].add_(out)
                 s2[g].addcmul_(out, out)
             else:
@@ -136,8 +137,11 @@ class CostVolume:
         m = self.group_matrix.to(s1.device)  # (G, 9), rows normalised by the group's count
         h, w = self.shape
         mean = (m @ s1.reshape(9, -1)).reshape(-1, h, w)
-        if self.cost == "variance":
+        if self.cost != "sad":
             cost = torch.clamp((m @ s2.reshape(9, -1)).reshape(-1, h, w) - mean * mean, min=0.0)
+            if self.cost == "anchored":  # mean squared difference to the centre view
+                p = self.pad
+                cost = cost + (mean - self.padded[self.centre, p:p + h, p:p + w]) ** 2
         else:
             cost = mean
         return cost[0] if cost.shape[0] == 1 else cost.amin(0)

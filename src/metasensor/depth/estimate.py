@@ -26,6 +26,7 @@ included: about 48 s of CPU time (25 s on 2 cores).
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -43,11 +44,16 @@ from metasensor.depth.refine import (
     peak_ratio_confidence,
     subpixel_minimum,
 )
+from metasensor.depth.span import measure_span, saturation
 
 __all__ = ["DepthResult", "estimate_depth"]
 
 
 MAX_CANDIDATES = 1024  # plane-sweep disparities, at most
+MIN_CANDIDATES = 64  # the automatic candidate count, at least
+OUTER_STEP = 0.5  # automatic candidate spacing: the outermost view moves this many view px
+COARSE_SATURATED = 0.01  # the same for the coarse search
+SATURATED = 0.001  # share of confident pixels on an end of the span that widens or warns
 
 
 @dataclass(frozen=True)
@@ -65,6 +71,15 @@ class DepthResult:
         geometry is known, else ``None`` (``image_depth`` is there either way);
         ``depth_kind`` says which metric maps exist (``"object"`` or ``"image"`` only).
     candidates : the candidate disparities of the plane sweep (view px per view step).
+    valid : bool, pixels whose estimate the data support (confidence at least the fill
+        threshold and not on an end of the span); elsewhere ``disparity`` is filled from the
+        confident neighbours or kept as the sweep found it, and is a guess.
+    span_source : ``"measured"`` (coarse wide search, :mod:`metasensor.depth.span`) or
+        ``"given"``.
+    saturated : shares (low end, high end) of the pixels whose cost still falls at an end of the
+        final span (:func:`metasensor.depth.span.saturation`: the true disparity may lie
+        beyond); for a given span, at least the shares of the coarse wide search's confident
+        estimates below and above it.
     config : the system configuration used.
     """
 
@@ -76,6 +91,9 @@ class DepthResult:
     depth_kind: str
     candidates: np.ndarray
     config: SystemConfig
+    valid: np.ndarray | None = None
+    span_source: str = "given"
+    saturated: tuple[float, float] = (0.0, 0.0)
 
     def __repr__(self) -> str:  # the maps by shape and dtype, not their values
         from metasensor.summary import short_repr
@@ -99,40 +117,22 @@ def _check_views(views, cfg: SystemConfig) -> np.ndarray:
     return arr
 
 
-def estimate_depth(views, cfg: SystemConfig, calibration=None, *, candidates: int = 64,
-                   disparity_range: tuple[float, float] | None = None,
-                   view_mask: np.ndarray | None = None, cost: str = "variance",
-                   occlusion: bool = True, radius: int = 4, eps: float = 0.01,
-                   refine_iterations: int = 2, fill: bool = True, fill_threshold: float = 0.1,
-                   fill_radius: int = 16, normalize: bool = True,
-                   focal_length: float | None = None, focus_distance: float | None = None,
-                   device=None, progress: bool = False) -> DepthResult:
-    """Disparity, confidence and depth from views ``(nnum, nnum, H, W)`` (or a ``Capture``).
 
-    calibration : per-view aberration shift maps (``metasensor.depth.aberration``): an array
-        ``(nnum, nnum, 2, H, W)`` in view pixels (dy, dx), an object with ``.shift_maps(shape)``,
-        or a path to a system-aberration file. The views are warped by them first.
-    candidates, disparity_range : number and span of the plane-sweep disparities in view pixels
-        per view step (default span ``±scan/2``, :func:`geometry.default_disparity_range`).
-    view_mask : boolean ``(nnum, nnum)`` of the views to use (default ``cfg.view_mask()``); it must
-        contain the centre view. ``cost``: ``"variance"`` or ``"sad"``; ``occlusion``: half-pupil
-        occlusion handling. ``radius`` [view px] and ``eps`` (relative to the guide's variance) of
-        the guided cost aggregation. ``refine_iterations``: Gauss–Newton steps (0 = parabola fit
-        only). ``fill``: replace pixels with confidence below ``fill_threshold`` by an
-        edge-aware, confidence-weighted average of the confident ones within ``fill_radius``.
-    focal_length, focus_distance : main-lens geometry [m] overriding the config's.
-    """
-    if not isinstance(cfg, SystemConfig):
-        raise TypeError(f"cfg must be a SystemConfig, got {type(cfg).__name__}")
-    arr = _check_views(views, cfg)
+
+def _check_settings(cfg, arr, candidates, radius, refine_iterations, refine_radius, fill_radius,
+                    eps, disparity_range, view_mask) -> np.ndarray:
+    """Validate the settings (one-line errors); returns the boolean view mask."""
     n, c = cfg.nnum, cfg.center
     side = max(arr.shape[2:])
     # upper bounds: windows beyond the view, and sweeps finer than 1/1000 of the range (a cost
     # volume of candidates x H x W floats) are mistakes, not settings
-    for name, value, low, high in (("radius", radius, 1, side),
-                                   ("refine_iterations", refine_iterations, 0, 100),
-                                   ("fill_radius", fill_radius, 1, side),
-                                   ("candidates", candidates, 2, MAX_CANDIDATES)):
+    checks = [("radius", radius, 1, side), ("refine_iterations", refine_iterations, 0, 100),
+              ("fill_radius", fill_radius, 1, side)]
+    if candidates is not None:
+        checks.append(("candidates", candidates, 3, MAX_CANDIDATES))
+    if refine_radius is not None:
+        checks.append(("refine_radius", refine_radius, 1, side))
+    for name, value, low, high in checks:
         if not (isinstance(value, int | np.integer) and low <= value <= high):
             raise ValueError(f"{name} must be an integer in [{low}, {high}], got {value!r}")
     if not (isinstance(eps, int | float) and math.isfinite(eps) and eps > 0):
@@ -151,50 +151,151 @@ def estimate_depth(views, cfg: SystemConfig, calibration=None, *, candidates: in
         raise ValueError(f"view_mask must have shape {(n, n)}, got {mask.shape}")
     if not mask[c, c] or mask.sum() < 2:
         raise ValueError("view_mask must contain the centre view and at least one other view")
-    rng_ = geometry.default_disparity_range(cfg) if disparity_range is None else disparity_range
-    cands = geometry.disparity_candidates(rng_, candidates)
-    lens = geometry.main_lens_geometry(cfg, focal_length, focus_distance)
-    shift_maps = resolve_shift_maps(calibration, n, (h, w))
-    dev = resolve_device(device)
+    return mask
 
-    uu, vv = np.nonzero(mask)
-    au, av = (uu - c).astype(np.float64), (vv - c).astype(np.float64)
+
+def _prepared_stack(arr, uu, vv, shift_maps, normalize: bool, dev) -> torch.Tensor:
+    """The used views as one float32 tensor: a copy, warped and normalised by their means."""
     # fancy indexing copies: the caller's array is never touched, and torch shares this copy
     sel = np.ascontiguousarray(arr[uu, vv], dtype=np.float32)
     if not np.isfinite(sel).all():
         raise ValueError("views contain NaN or infinite values")
+    stack = torch.from_numpy(sel).to(dev)
+    if shift_maps is not None:
+        stack = warp_views(stack, torch.tensor(shift_maps[uu, vv], device=dev))
+    if normalize:
+        means = stack.mean(dim=(1, 2), keepdim=True)
+        if bool((means <= 0).any()):
+            raise ValueError("a view inside the pupil has a non-positive mean; "
+                             "pass normalize=False or a smaller view_mask")
+        stack.div_(means).mul_(means.mean())
+    return stack
+
+
+def _candidates(span, candidates: int | None, amax: float) -> np.ndarray:
+    if candidates is None:  # the outermost view moves OUTER_STEP view px per candidate
+        width = float(span[1] - span[0])
+        candidates = int(min(MAX_CANDIDATES, max(MIN_CANDIDATES,
+                                                 math.ceil(width * amax / OUTER_STEP) + 1)))
+    return geometry.disparity_candidates(span, candidates)
+
+
+def _sweep(stack, au, av, centre, cands, gf, cost, occlusion, progress):
+    """Plane sweep + winner-take-all: ``(disparity, winner index, confidence, saturation
+    (low, high), sweep)``."""
+    sweep = CostVolume(stack, au, av, centre, float(np.abs(cands).max()), cost=cost,
+                       occlusion=occlusion)
+    vol = sweep.volume(cands, aggregate=gf, progress=progress)
+    disp, idx = subpixel_minimum(vol, cands)
+    conf = peak_ratio_confidence(vol, idx)
+    # saturation is judged over the disparity change that moves the outermost view by a pixel
+    amax = float(max(np.abs(au).max(), np.abs(av).max()))
+    steps = int(min(len(cands) // 4, max(3, math.ceil(1.0 / (amax * (cands[1] - cands[0]))))))
+    return disp, idx, conf, saturation(vol, idx, steps=steps), sweep
+
+
+def _widened(span, limit, low: float, high: float):
+    """The span grown by half its width on each saturated side, within ``limit``."""
+    lo, hi = span
+    half = 0.5 * (hi - lo)
+    if low > SATURATED:
+        lo = max(lo - half, limit[0])
+    if high > SATURATED:
+        hi = min(hi + half, limit[1])
+    return (lo, hi)
+
+
+def estimate_depth(views, cfg: SystemConfig, calibration=None, *, candidates: int | None = None,
+                   disparity_range: tuple[float, float] | None = None,
+                   view_mask: np.ndarray | None = None, cost: str = "variance",
+                   occlusion: bool = True, radius: int = 4, eps: float = 0.01,
+                   refine_iterations: int = 2, refine_radius: int | None = None,
+                   fill: bool = True, fill_threshold: float = 0.1,
+                   fill_radius: int = 16, normalize: bool = True,
+                   focal_length: float | None = None, focus_distance: float | None = None,
+                   device=None, progress: bool = False) -> DepthResult:
+    """Disparity, confidence and depth from views ``(nnum, nnum, H, W)`` (or a ``Capture``).
+
+    calibration : per-view aberration shift maps (``metasensor.depth.aberration``): an array
+        ``(nnum, nnum, 2, H, W)`` in view pixels (dy, dx), an object with ``.shift_maps(shape)``,
+        or a path to a system-aberration file. The views are warped by them first.
+    disparity_range : span of the plane-sweep disparities in view pixels per view step. Default
+        (None): measured from the views by a coarse wide search
+        (:func:`metasensor.depth.span.measure_span`, covering at least
+        :func:`geometry.default_disparity_range`), and widened where the estimate saturates an
+        end; a given span is kept, with a warning when the estimate saturates it.
+    candidates : number of plane-sweep disparities; None: the outermost view moves
+        ``OUTER_STEP`` view px per candidate (at least ``MIN_CANDIDATES``).
+    view_mask : boolean ``(nnum, nnum)`` of the views to use (default ``cfg.view_mask()``); it must
+        contain the centre view. ``cost``: ``"variance"`` or ``"sad"``; ``occlusion``: half-pupil
+        occlusion handling. ``radius`` [view px] and ``eps`` (relative to the guide's variance) of
+        the guided cost aggregation. ``refine_iterations``: Gauss–Newton steps (0 = parabola fit
+        only), aggregated over ``refine_radius`` (None: ``radius``). ``fill``: replace pixels
+        with confidence below ``fill_threshold`` by an edge-aware, confidence-weighted average
+        of the confident ones within ``fill_radius`` (``DepthResult.valid`` marks the others).
+    focal_length, focus_distance : main-lens geometry [m] overriding the config's.
+    """
+    if not isinstance(cfg, SystemConfig):
+        raise TypeError(f"cfg must be a SystemConfig, got {type(cfg).__name__}")
+    arr = _check_views(views, cfg)
+    mask = _check_settings(cfg, arr, candidates, radius, refine_iterations, refine_radius,
+                           fill_radius, eps, disparity_range, view_mask)
+    n, c = cfg.nnum, cfg.center
+    lens = geometry.main_lens_geometry(cfg, focal_length, focus_distance)
+    shift_maps = resolve_shift_maps(calibration, n, arr.shape[2:])
+    dev = resolve_device(device)
+    uu, vv = np.nonzero(mask)
+    au, av = (uu - c).astype(np.float64), (vv - c).astype(np.float64)
+    amax = float(max(np.abs(au).max(), np.abs(av).max()))
     with torch.no_grad():
-        stack = torch.from_numpy(sel).to(dev)
-        del sel
-        if shift_maps is not None:
-            stack = warp_views(stack, torch.tensor(shift_maps[uu, vv], device=dev))
-        if normalize:
-            means = stack.mean(dim=(1, 2), keepdim=True)
-            if bool((means <= 0).any()):
-                raise ValueError("a view inside the pupil has a non-positive mean; "
-                                 "pass normalize=False or a smaller view_mask")
-            stack.div_(means).mul_(means.mean())
+        stack = _prepared_stack(arr, uu, vv, shift_maps, normalize, dev)
         centre = int(np.nonzero((uu == c) & (vv == c))[0][0])
         guide = stack[centre].clone()
         gf = GuidedFilter(guide, radius=radius, eps=eps)
-        sweep = CostVolume(stack, au, av, centre, float(np.abs(cands).max()), cost=cost,
-                           occlusion=occlusion)
-        # from here on the (mean-subtracted, padded) copy inside the sweep serves for the views:
-        # the refinement's variance does not see a constant offset
-        del stack
-        vol = sweep.volume(cands, aggregate=gf, progress=progress)
-        disp, idx = subpixel_minimum(vol, cands)
-        conf = peak_ratio_confidence(vol, idx)
-        stack = sweep.views
-        del vol, sweep
+        given = None if disparity_range is None else (float(disparity_range[0]),
+                                                      float(disparity_range[1]))
+        found = measure_span(stack, au, av, centre, geometry.default_disparity_range(cfg),
+                             occlusion=occlusion, given=given)
+        if given is None:
+            span, limit = found.span, found.searched
+            if found.saturated > COARSE_SATURATED:
+                warnings.warn(f"{100 * found.saturated:.1f} % of the coarse estimates "
+                              f"saturate an end of the widest search {limit[0]:+.2f} .. "
+                              f"{limit[1]:+.2f} view px per view step: larger disparities are "
+                              "not found", RuntimeWarning, stacklevel=2)
+        else:
+            span, limit = given, None
+        while True:
+            cands = _candidates(span, candidates, amax)
+            disp, idx, conf, sat, sweep = _sweep(stack, au, av, centre, cands, gf, cost, occlusion,
+                                            progress)
+            # the (mean-subtracted, padded) copy inside the sweep serves for the views from here
+            del stack
+            stack = sweep.views
+            del sweep
+            wider = None if limit is None else _widened(span, limit, *sat)
+            if wider is None or wider == span:
+                break
+            span = wider
+        if limit is None:  # a given span: the coarse search says whether it holds the scene
+            sat = tuple(max(a, b) for a, b in zip(sat, found.beyond, strict=True))
+            if max(sat) > SATURATED:
+                warnings.warn(f"{100 * sat[0]:.1f} % / {100 * sat[1]:.1f} % of the scene lies "
+                              f"below / above disparity_range {span} (coarse wide search): "
+                              "widen it (or leave it to the default, measured)",
+                              RuntimeWarning, stacklevel=2)
+        ends = (idx == 0) | (idx == len(cands) - 1)
         if refine_iterations > 0:
-            disp = gauss_newton_refine(stack, au, av, disp, gf, iterations=refine_iterations,
+            gfr = gf if refine_radius is None else GuidedFilter(guide, radius=refine_radius,
+                                                                 eps=eps)
+            disp = gauss_newton_refine(stack, au, av, disp, gfr, iterations=refine_iterations,
                                        max_change=float(cands[1] - cands[0]),
                                        occlusion=occlusion)
             disp = torch.clamp(disp, float(cands[0]), float(cands[-1]))
         if fill:
             disp = fill_low_confidence(disp, conf, guide, radius=fill_radius,
                                        threshold=fill_threshold, eps=eps)
+        valid = to_numpy((conf >= fill_threshold) & ~ends).astype(bool)
         disparity = to_numpy(disp).astype(np.float32)
         confidence = to_numpy(conf).astype(np.float32)
     z = geometry.disparity_to_image_depth(disparity, cfg).astype(np.float32)
@@ -204,5 +305,6 @@ def estimate_depth(views, cfg: SystemConfig, calibration=None, *, candidates: in
     return DepthResult(
         disparity=disparity, confidence=confidence, image_depth=z, object_distance=obj,
         depth=obj, depth_kind="object" if obj is not None else "image",
-        candidates=cands, config=cfg,
+        candidates=cands, config=cfg, valid=valid,
+        span_source="given" if limit is None else "measured", saturated=sat,
     )

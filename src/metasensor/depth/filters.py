@@ -78,3 +78,4 @@ class GuidedFilter:
         num = self(p * weight)
         den = self(weight)
         return num / torch.clamp(den, min=floor)
+

@@ -31,10 +31,12 @@ __all__ = ["Layer", "SyntheticViews", "random_texture", "render_views", "scene_p
 @dataclass(frozen=True)
 class Layer:
     """One scene layer: opacity ``alpha`` (H, W) in [0, 1] and disparity (scalar or (H, W)) in
-    IMAGE pixels per view step, both on the image-pixel grid in centre-view coordinates."""
+    IMAGE pixels per view step, both on the image-pixel grid in centre-view coordinates;
+    ``texture`` (H, W): the layer's own texture (None: the scene's common texture)."""
 
     alpha: np.ndarray
     disparity: float | np.ndarray
+    texture: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -148,7 +150,10 @@ def render_views(texture: np.ndarray, layers: list[Layer], cfg: SystemConfig,
         if alpha.shape != texture.shape:
             raise ValueError(f"layer alpha shape {alpha.shape} != texture {texture.shape}")
         # blurred colour and opacity, spline-prefiltered once (sampled below with prefilter off)
-        col = ndimage.spline_filter(ndimage.convolve(texture * alpha, kern, mode="reflect"),
+        tex_l = texture if layer.texture is None else np.asarray(layer.texture, np.float64)
+        if tex_l.shape != texture.shape:
+            raise ValueError(f"layer texture shape {tex_l.shape} != texture {texture.shape}")
+        col = ndimage.spline_filter(ndimage.convolve(tex_l * alpha, kern, mode="reflect"),
                                     order=3, mode="mirror")
         alp = ndimage.spline_filter(ndimage.convolve(alpha, kern, mode="reflect"), order=3,
                                     mode="mirror")

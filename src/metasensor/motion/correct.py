@@ -27,6 +27,7 @@ import numpy as np
 from scipy import ndimage
 
 from metasensor.motion.consistency import RESOLVED_MIN, dense_confidence, resolved_fraction
+from metasensor.motion.evidence import sample_evidence
 from metasensor.motion.flow import (
     FLOW_METHODS,
     _few_threads,
@@ -90,7 +91,7 @@ def _check_image(img, name: str) -> np.ndarray:
 def estimate_motion(view: np.ndarray, scan_order, reference: int | None = None,
                     method: str = "dis", threshold: float = 0.5, smooth: float = 1.0,
                     max_ratio: float = 0.5, grid: tuple[int, int] = (6, 6), device=None,
-                    occlusion_tol: float | None = 1.0) -> np.ndarray:
+                    occlusion_tol: float | None = 1.0, evidence: bool = False) -> np.ndarray:
     """Motion of every view sample relative to the reference time: ``(2, H, W)`` (dy, dx) view
     pixels, exactly zero where the motion is below ``threshold`` (static) or does not explain
     the data better than no motion (residual ratio ≥ ``max_ratio``; 1 disables the test:
@@ -102,7 +103,17 @@ def estimate_motion(view: np.ndarray, scan_order, reference: int | None = None,
     points per sub-image, :func:`.flow.registration_grid`). Inside the moving region, samples that
     fail the forward–backward flow check (``occlusion_tol`` view px; None disables; optical
     flow only) are occluded at the reference time: their motion is NaN and they are left out of
-    the interpolation."""
+    the interpolation. ``evidence`` (optical flow only): judge every sample against the
+    reference frame (:func:`.evidence.sample_evidence`): the moving region grows to every
+    coherent change, and samples whose moved prediction does not fit are left out (NaN)."""
+    return _motion_and_gain(view, scan_order, reference, method, threshold, smooth, max_ratio,
+                            grid, device, occlusion_tol, evidence)[0]
+
+
+def _motion_and_gain(view, scan_order, reference, method, threshold, smooth, max_ratio, grid,
+                     device, occlusion_tol, evidence) -> tuple[np.ndarray, np.ndarray | None]:
+    """Dense motion ``(2, H, W)`` and, with ``evidence``, the brightness of every sample
+    relative to the reference time ``(H, W)`` (None without)."""
     view = _check_image(view, "view")
     order, p, ref = _resolve(scan_order, reference, view.shape)
     occ = resolved = None
@@ -110,7 +121,7 @@ def estimate_motion(view: np.ndarray, scan_order, reference: int | None = None,
         resolved = resolved_fraction(view, p)
         if not (resolved >= RESOLVED_MIN).any():
             # nothing the sub-images resolve (a star field): no flow could count
-            return np.zeros((2, *view.shape), np.float32)
+            return np.zeros((2, *view.shape), np.float32), None
     if method == "registration":
         m = registration_flows(view, order, ref, grid=grid, device=device)
     else:
@@ -124,10 +135,16 @@ def estimate_motion(view: np.ndarray, scan_order, reference: int | None = None,
     elif max_ratio < 1:
         conf = motion_confidence(view, order, ref, m)
     m = suppress_static(m, threshold=threshold, confidence=conf, max_ratio=max_ratio)
+    if evidence and method != "registration":
+        ev = sample_evidence(view, order, ref, m, occluded=occ)
+        gain = np.broadcast_to(ev.gains[:, None, None, None], (len(order), 1, *m.shape[-2:]))
+        gain = np.where(ev.kept[:, None], gain, 1.0)
+        gain = _dense(np.repeat(gain, 2, axis=1), order, view.shape)[0]
+        return _dense(ev.motion, order, view.shape), gain
     if occ is not None:
         region = np.any(m != 0, axis=(0, 1))
         m[np.broadcast_to((occ & region[None])[:, None], m.shape)] = np.nan
-    return _dense(m, order, view.shape)
+    return _dense(m, order, view.shape), None
 
 
 def _dense(m: np.ndarray, order, shape) -> np.ndarray:
@@ -205,7 +222,7 @@ def correct_motion(view_image: np.ndarray, scan_order: Sequence | str | None,
                    reference: int | None = None,
                    *, method: str = "dis", scatter: str = "linear", threshold: float = 0.5,
                    smooth: float = 1.0, max_ratio: float = 0.5,
-                   motion: np.ndarray | None = None) -> np.ndarray:
+                   motion: np.ndarray | None = None, evidence: bool = False) -> np.ndarray:
     """Remove the scan artefacts of moving objects from one realigned view (interface.md).
 
     view_image: ``(H, W)``, sample (y, x) taken at frame ``scan_order.index((y % p, x % p))``;
@@ -218,18 +235,26 @@ def correct_motion(view_image: np.ndarray, scan_order: Sequence | str | None,
     scipy griddata "cubic", as the paper); threshold: motions below this
     (view px) are flow noise and ignored, as are motions that do not lower the warping residual
     below ``max_ratio`` times that of "no motion"; motion: a precomputed ``(2, H, W)`` field
-    (skips the flow). Returns ``(H, W)`` float32; static regions are returned unchanged.
+    (skips the flow); evidence: per-sample gating and brightness matching
+    (:func:`estimate_motion`). Returns ``(H, W)`` float32; static regions are returned
+    unchanged.
     """
     view = _check_image(view_image, "view_image")
     _check_options(scatter, threshold, smooth, method, max_ratio)
     order, p, ref = _resolve(scan_order, reference, view.shape)
+    gain = None
     if motion is None:
-        motion = estimate_motion(view, order, ref, method=method, threshold=threshold,
-                                 smooth=smooth, max_ratio=max_ratio)
+        motion, gain = _motion_and_gain(view, order, ref, method, threshold, smooth, max_ratio,
+                                        (6, 6), None, 1.0, evidence)
     elif np.shape(motion) != (2, *view.shape):
         raise ValueError(f"motion must have shape (2, {view.shape[0]}, {view.shape[1]}), "
                          f"got {np.shape(motion)}")
-    return MotionPlan(motion, p, scatter=scatter).apply(view)
+    plan = MotionPlan(motion, p, scatter=scatter)
+    if gain is not None and not plan.empty:
+        out = plan.apply(view / gain)
+        return np.where(plan.affected, out, view).astype(np.float32)
+    return plan.apply(view)
+
 
 
 def sharpest_view(views: np.ndarray) -> tuple[int, int]:

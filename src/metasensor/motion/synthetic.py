@@ -17,7 +17,7 @@ from scipy import ndimage
 
 from metasensor.sensor.scan import check_scan_order, period_of
 
-__all__ = ["natural_scene", "phase_time_map", "dynamic_view", "scan_artifact",
+__all__ = ["natural_scene", "phase_time_map", "dynamic_view", "scan_artifact", "lattice_ratio",
            "rigid_motion", "smooth_random_motion"]
 
 
@@ -168,4 +168,47 @@ def scan_artifact(image: np.ndarray, period: int, region: tuple[slice, slice] | 
                 disk |= peak
     if ref is not None:
         num, den = power(img - ref)[disk].sum(), power(ref)[disk].sum()
+    return float(num / max(den, 1e-300))
+
+
+def lattice_ratio(image: np.ndarray, period: int, mask: np.ndarray | None = None,
+                  radius: float = 0.02, ring: tuple[float, float] = (0.03, 0.05)) -> float:
+    """Scan-lattice energy of ``image`` relative to its local spectrum: the spectral energy
+    within ``radius`` (cycles/sample) of the scan lattice frequencies (k/p, l/p) (DC excluded)
+    over the image's own level there (mean energy per bin in the ``ring`` around each,
+    times the disk's bins). About 1 for an image without a scan artefact; larger with one.
+
+    Spectra of the mean-removed bounding box of ``mask`` (boolean ``(H, W)``, the region to
+    judge; None: the whole image), windowed by the mask feathered over ``period / 2`` px
+    (Gaussian) and a Hann window. Hand-written, as :func:`scan_artifact`.
+    """
+    img = np.asarray(image, np.float64)
+    win = np.ones(img.shape)
+    if mask is not None:
+        mask = np.asarray(mask, bool)
+        ys, xs = np.nonzero(mask)
+        if ys.size == 0:
+            raise ValueError("mask is empty")
+        box = (slice(ys.min(), ys.max() + 1), slice(xs.min(), xs.max() + 1))
+        # the region itself, feathered over a lenslet: other content in its box does not count
+        win = ndimage.gaussian_filter(mask.astype(np.float64), period / 2)[box]
+        img = img[box]
+    h, w = img.shape
+    if min(h, w) < 4 * period:
+        raise ValueError(f"region {h} x {w} is too small for scan period {period}")
+    win = win * np.outer(np.hanning(h), np.hanning(w))
+    mean = float((img * win).sum() / max(win.sum(), 1e-300))
+    spec = np.abs(np.fft.fft2((img - mean) * win)) ** 2
+    fy = np.fft.fftfreq(h)[:, None]
+    fx = np.fft.fftfreq(w)[None, :]
+    num = den = 0.0
+    for k in range(period):
+        for m in range(period):
+            if k == 0 and m == 0:
+                continue
+            dist = np.hypot((fy - k / period + 0.5) % 1.0 - 0.5,
+                            (fx - m / period + 0.5) % 1.0 - 0.5)
+            peak = dist <= radius
+            num += spec[peak].sum()
+            den += spec[(dist >= ring[0]) & (dist <= ring[1])].mean() * peak.sum()
     return float(num / max(den, 1e-300))
