@@ -87,3 +87,24 @@ def test_provenance_records_version_command_checksums_and_settings(tmp_path, mon
     assert p["inputs"] == {"views": {"path": str(tmp_path / "a.tif"),
                                      "sha256": hashlib.sha256(b"abc").hexdigest()}}
     assert p["settings"] == {"blocks": "2x2"}
+
+
+def test_ome_zarr_rewrite_replaces_own_store_and_keeps_a_users_folder(tmp_path):
+    """An OME-Zarr output replaces only an OME-Zarr store this package wrote (renamed away,
+    the new one in, then deleted); a user's folder under that name is refused, untouched."""
+    from metasensor.io.atomic import is_own_zarr
+    from metasensor.io.omezarr import read_ome_zarr, write_ome_zarr
+
+    img = np.random.default_rng(0).random((130, 130)).astype(np.float32)
+    out = tmp_path / "r.ome.zarr"
+    write_ome_zarr(out, img, 4.6e-6, {"kind": "image"})
+    assert is_own_zarr(out)
+    write_ome_zarr(out, 2 * img, 4.6e-6, {"kind": "image"})
+    assert np.array_equal(np.asarray(read_ome_zarr(out)[0]), 2 * img)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["r.ome.zarr"]  # no temporary left
+    user = tmp_path / "mine.ome.zarr"
+    user.mkdir()
+    (user / "notes.txt").write_text("keep")
+    with pytest.raises(ValueError, match="not a Zarr store written by metasensor"):
+        write_ome_zarr(user, img, None, {})
+    assert (user / "notes.txt").read_text() == "keep"

@@ -25,8 +25,7 @@ from pathlib import Path
 
 __all__ = ["atomic_path", "atomic_write_text", "atomic_write_bytes", "refuse_overwrite",
            "result_folder", "StagedFolder", "replace_tree", "sibling_name", "remove_stale",
-           "is_own_zarr",
-           "write_error"]
+           "is_own_zarr", "discard_tree", "write_error"]
 
 _NAME_MAX = 255
 
@@ -172,24 +171,43 @@ _CHUNK = re.compile(r"^\d+(\.\d+)*$")
 
 def is_own_zarr(path: str | Path) -> bool:
     """``path`` is a Zarr array written by this package: a folder holding only Zarr metadata and
-    chunk keys, whose attributes carry the ``"metasensor"`` entry (never a user's folder)."""
+    chunk keys, whose attributes carry the ``"metasensor"`` entry (never a user's folder); or
+    an OME-Zarr group of this package (its attributes carry the entry, and every sub-folder is
+    a Zarr array of chunk keys only)."""
     path = Path(path)
+    if _is_zarr_tree(path, group=True):
+        return _has_own_attrs(path)
+    return _is_zarr_tree(path, group=False) and _has_own_attrs(path)
+
+
+def _is_zarr_tree(path: Path, group: bool) -> bool:
+    """A folder of Zarr metadata and chunk keys only (``group``: its entries besides metadata
+    are Zarr arrays of that kind, the levels of a multiscale image)."""
     if not path.is_dir() or path.is_symlink():
         return False
     try:
         names = set(os.listdir(path))
     except OSError:
         return False
-    if not names & {"zarr.json", ".zarray"}:
+    if not names & ({"zarr.json", ".zgroup"} if group else {"zarr.json", ".zarray"}):
         return False
     for name in names - _ZARR_META:
-        if name == "c" and (path / "c").is_dir():
+        if group:
+            if name.startswith(".") or not _is_zarr_tree(path / name, group=False):
+                return False
+        elif name == "c" and (path / "c").is_dir():
             for root, _, files in os.walk(path / "c"):
                 parts = Path(root).relative_to(path / "c").parts
                 if not all(_CHUNK.match(s) for s in (*parts, *files)):
                     return False
         elif not (_CHUNK.match(name) and (path / name).is_file()):
             return False
+    return True
+
+
+def _has_own_attrs(path: Path) -> bool:
+    """The folder's Zarr attributes carry the ``"metasensor"`` entry."""
+    names = set(os.listdir(path))
     try:
         if "zarr.json" in names:
             attrs = json.loads((path / "zarr.json").read_text()).get("attributes", {})
@@ -219,6 +237,33 @@ def replace_tree(new: Path, final: Path) -> None:
         except KeyboardInterrupt:  # finish removing what is no longer anyone's, then stop
             _remove(old)
             raise
+
+
+def discard_tree(path: str | Path, settle_s: float = 0.05, tries: int = 40) -> None:
+    """Remove a temporary folder that a background writer may still be adding to.
+
+    Zarr writes its chunks from an I/O thread of its own; when Ctrl-C stops the main thread,
+    that thread finishes the chunk it holds and can re-create the folder after a first
+    removal. The folder is removed until it stays absent for ``settle_s`` seconds (at most
+    ``tries`` rounds).
+
+    Parameters
+    ----------
+    path : str or Path
+        The temporary folder.
+    settle_s : float
+        Seconds the folder must stay absent after a removal.
+    tries : int
+        Rounds at most.
+    """
+    import time
+
+    path = Path(path)
+    for _ in range(tries):
+        shutil.rmtree(path, ignore_errors=True)
+        time.sleep(settle_s)
+        if not path.exists():
+            return
 
 
 def _remove(path: Path) -> None:

@@ -12,7 +12,6 @@ written under a temporary name and renamed.
 
 from __future__ import annotations
 
-import shutil
 from pathlib import Path
 
 import numpy as np
@@ -56,8 +55,20 @@ def write_ome_zarr(path: str | Path, array: np.ndarray, pixel_m: float | None, m
                          f"shape {array.shape}")
     um = 1.0 if pixel_m is None else pixel_m * 1e6
     units = {} if pixel_m is None else {"y": "micrometer", "x": "micrometer"}
-    tmp = path.with_name(f".{path.name}.tmp")
-    shutil.rmtree(tmp, ignore_errors=True)
+    from metasensor.io.atomic import (
+        discard_tree,
+        is_own_zarr,
+        remove_stale,
+        replace_tree,
+        sibling_name,
+    )
+
+    if path.exists() and not is_own_zarr(path):
+        raise ValueError(f"{path} exists and is not a Zarr store written by metasensor: not "
+                         "replaced")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    remove_stale(path)
+    tmp = path.parent / sibling_name(path, "tmp", suffix=".zarr")  # unique per run
     try:
         root = zarr.group(store=parse_url(str(tmp), mode="w").store, overwrite=True)
         scale = {"c": 1.0, "y": um, "x": um} if data.ndim == 3 else {"y": um, "x": um}
@@ -68,13 +79,9 @@ def write_ome_zarr(path: str | Path, array: np.ndarray, pixel_m: float | None, m
                                                 min(1024, data.shape[-2]),
                                                 min(1024, data.shape[-1]))})
         root.attrs["metasensor"] = meta
-        if path.is_dir():
-            shutil.rmtree(path)
-        elif path.exists():
-            raise ValueError(f"{path} exists and is not a Zarr store (a folder): not replaced")
-        tmp.rename(path)
+        replace_tree(tmp, path)  # the old store renamed away, the new one in, then old deleted
     except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
+        discard_tree(tmp)
         raise
     return path
 

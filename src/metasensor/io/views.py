@@ -114,11 +114,16 @@ def _imagej_tags(views: np.ndarray, cfg: SystemConfig | None, text: str
 def _write_zarr(path: Path, views: np.ndarray, meta: dict) -> Path:
     """Write the store under a unique temporary name, then swap it in (:func:`replace_tree`);
     an existing folder is replaced only if it is a metasensor Zarr store."""
-    import shutil
 
     import zarr
 
-    from metasensor.io.atomic import is_own_zarr, remove_stale, replace_tree, sibling_name
+    from metasensor.io.atomic import (
+        discard_tree,
+        is_own_zarr,
+        remove_stale,
+        replace_tree,
+        sibling_name,
+    )
 
     if path.exists() and not is_own_zarr(path):
         raise ValueError(f"{path} exists and is not a Zarr store written by metasensor: not "
@@ -135,7 +140,7 @@ def _write_zarr(path: Path, views: np.ndarray, meta: dict) -> Path:
         arr.attrs.update(meta)
         replace_tree(tmp, path)
     except BaseException as exc:
-        shutil.rmtree(tmp, ignore_errors=True)  # no half-written store left behind
+        discard_tree(tmp)  # no half-written store left behind
         if isinstance(exc, OSError):
             from metasensor.io.atomic import write_error
 

@@ -22,13 +22,12 @@ replaced only if it is an earlier mosaic of this function.
 from __future__ import annotations
 
 import math
-import shutil
 import uuid
 from pathlib import Path
 
 import numpy as np
 
-from metasensor.io.atomic import replace_tree
+from metasensor.io.atomic import discard_tree, replace_tree
 
 __all__ = ["blend_tiles", "feather", "MARGIN", "open_mosaic"]
 
@@ -187,7 +186,7 @@ def blend_tiles(tiles: dict, positions: dict, shape: tuple[int, int], out: str |
         root.attrs["metasensor"] = {"kind": "mosaic", "levels": len(shapes)}
         replace_tree(tmp, out)
     except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
+        discard_tree(tmp)  # zarr's I/O thread may still be writing into it
         raise
     return out
 
