@@ -277,7 +277,10 @@ def _check_period(raw, cfg, config, raw_path: Path) -> None:
     from metasensor.sensor.checks import PERIOD_TOLERANCE, lattice_period
 
     got = lattice_period([raw[t] for t in range(min(len(raw), 9))], cfg.nnum)
-    if got is not None and abs(got[0] - cfg.nnum) > PERIOD_TOLERANCE * cfg.nnum:
+    # a small frame resolves the period only to about nnum / (2 * side) (relative): the
+    # tolerance is the larger of that and the 2 % rule
+    tolerance = max(PERIOD_TOLERANCE, cfg.nnum / (2 * min(raw.shape[-2:])))
+    if got is not None and abs(got[0] - cfg.nnum) > tolerance * cfg.nnum:
         source = config if config is not None else "the default configuration"
         raise ValueError(f"{raw_path}: the frames' lenslet period measures {got[0]:.2f} px but "
                          f"nnum is {cfg.nnum} ({source}); set nnum = {round(got[0])} in --config "
