@@ -25,7 +25,7 @@ from pathlib import Path
 
 __all__ = ["atomic_path", "atomic_write_text", "atomic_write_bytes", "refuse_overwrite",
            "result_folder", "StagedFolder", "replace_tree", "sibling_name", "remove_stale",
-           "is_own_zarr", "discard_tree", "write_error"]
+           "is_own_zarr", "discard_tree", "staged_zarr", "write_error"]
 
 _NAME_MAX = 255
 
@@ -264,6 +264,35 @@ def discard_tree(path: str | Path, settle_s: float = 0.05, tries: int = 40) -> N
         time.sleep(settle_s)
         if not path.exists():
             return
+
+
+@contextlib.contextmanager
+def staged_zarr(path: str | Path) -> Iterator[Path]:
+    """Yield a unique temporary folder beside the Zarr store ``path``; on success swap it in
+    (:func:`replace_tree`), on any error (Ctrl-C included) remove it (:func:`discard_tree`).
+
+    An existing folder at ``path`` is replaced only if it is a store of this package
+    (:func:`is_own_zarr`); anything else is refused with a ``ValueError``, untouched. An
+    ``OSError`` becomes one line naming ``path`` (:func:`write_error`).
+    """
+    path = Path(path)
+    if path.exists() and not is_own_zarr(path):
+        raise ValueError(f"{path} exists and is not a Zarr store written by metasensor: not "
+                         "replaced")
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        remove_stale(path)
+    except OSError as exc:
+        raise write_error(path, exc) from None
+    tmp = path.parent / sibling_name(path, "tmp", suffix=".zarr")  # unique per run
+    try:
+        yield tmp
+        replace_tree(tmp, path)  # the old store renamed away, the new one in, then old deleted
+    except BaseException as exc:
+        discard_tree(tmp)  # no half-written store left behind
+        if isinstance(exc, OSError):
+            raise write_error(path, exc) from None
+        raise
 
 
 def _remove(path: Path) -> None:

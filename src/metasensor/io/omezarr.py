@@ -55,21 +55,9 @@ def write_ome_zarr(path: str | Path, array: np.ndarray, pixel_m: float | None, m
                          f"shape {array.shape}")
     um = 1.0 if pixel_m is None else pixel_m * 1e6
     units = {} if pixel_m is None else {"y": "micrometer", "x": "micrometer"}
-    from metasensor.io.atomic import (
-        discard_tree,
-        is_own_zarr,
-        remove_stale,
-        replace_tree,
-        sibling_name,
-    )
+    from metasensor.io.atomic import staged_zarr
 
-    if path.exists() and not is_own_zarr(path):
-        raise ValueError(f"{path} exists and is not a Zarr store written by metasensor: not "
-                         "replaced")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    remove_stale(path)
-    tmp = path.parent / sibling_name(path, "tmp", suffix=".zarr")  # unique per run
-    try:
+    with staged_zarr(path) as tmp:
         root = zarr.group(store=parse_url(str(tmp), mode="w").store, overwrite=True)
         scale = {"c": 1.0, "y": um, "x": um} if data.ndim == 3 else {"y": um, "x": um}
         write_image(data, root, axes=axes, scale=scale, axes_units=units or None,
@@ -79,10 +67,6 @@ def write_ome_zarr(path: str | Path, array: np.ndarray, pixel_m: float | None, m
                                                 min(1024, data.shape[-2]),
                                                 min(1024, data.shape[-1]))})
         root.attrs["metasensor"] = meta
-        replace_tree(tmp, path)  # the old store renamed away, the new one in, then old deleted
-    except BaseException:
-        discard_tree(tmp)
-        raise
     return path
 
 

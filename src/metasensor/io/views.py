@@ -114,38 +114,16 @@ def _imagej_tags(views: np.ndarray, cfg: SystemConfig | None, text: str
 def _write_zarr(path: Path, views: np.ndarray, meta: dict) -> Path:
     """Write the store under a unique temporary name, then swap it in (:func:`replace_tree`);
     an existing folder is replaced only if it is a metasensor Zarr store."""
-
     import zarr
 
-    from metasensor.io.atomic import (
-        discard_tree,
-        is_own_zarr,
-        remove_stale,
-        replace_tree,
-        sibling_name,
-    )
+    from metasensor.io.atomic import staged_zarr
 
-    if path.exists() and not is_own_zarr(path):
-        raise ValueError(f"{path} exists and is not a Zarr store written by metasensor: not "
-                         "replaced")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    remove_stale(path)
-    tmp = path.parent / sibling_name(path, "tmp", suffix=".zarr")
-    n = views.shape[0]
-    try:
+    with staged_zarr(path) as tmp:
         arr = zarr.open_array(str(tmp), mode="w-", shape=views.shape, dtype=views.dtype,
                               chunks=(1, 1, min(1024, views.shape[2]), min(1024, views.shape[3])))
-        for u in range(n):
+        for u in range(views.shape[0]):
             arr[u] = views[u]
         arr.attrs.update(meta)
-        replace_tree(tmp, path)
-    except BaseException as exc:
-        discard_tree(tmp)  # no half-written store left behind
-        if isinstance(exc, OSError):
-            from metasensor.io.atomic import write_error
-
-            raise write_error(path, exc) from None
-        raise
     return path
 
 
