@@ -1,12 +1,10 @@
 """Measurements the scenarios report: local resolved frequency, kymograph scan artefacts.
 
-- :func:`resolved_frequency`: the finest spatial frequency (cycles/pixel) an image transfers in a
-  region, from the cross-spectral transfer ``T(f) = Re Σ F_img conj(F_truth) / Σ |F_truth|²``
-  over rings of radial frequency (the image's contrast at f relative to the truth's: the MTF of
-  the whole chain, including what a reconstruction restores), Hann-windowed; the resolved
-  frequency is where T first falls below ``threshold`` (0.2: a bar group is still seen at about
-  that modulation). Rings where the truth holds too little energy are skipped. Bar groups
-  "k times finer" are k times this frequency.
+- :func:`resolved_frequency`: the project's resolved frequency
+  (:func:`metasensor.metrics.spectral.resolved_frequency`: the highest radial frequency below
+  which the error-to-truth power ratio stays under 0.5) of one region, so that scenario
+  figures and the quality benchmark use one definition. Bar groups "k times finer" are k
+  times this frequency.
 - :func:`lattice_energy`: the energy of an image sequence's kymograph at the scan lattice's
   temporal frequency (one cycle per scan step of a sliding window) relative to its mean power
   (hand-written: a one-dimensional spectrum along time).
@@ -19,38 +17,28 @@ import numpy as np
 __all__ = ["resolved_frequency", "field_resolution", "lattice_energy"]
 
 
-def _spectrum(a: np.ndarray) -> np.ndarray:
-    from skimage.filters import window
+def resolved_frequency(image, truth, threshold: float = 0.5) -> float:
+    """Resolved frequency [cycles/px] of ``image`` against ``truth`` in one region.
 
-    a = np.asarray(a, dtype=np.float64)
-    return np.fft.fft2((a - a.mean()) * window("hann", a.shape))
+    Parameters
+    ----------
+    image, truth : array_like
+        Equal 2-D regions of at least 16 px a side, on one intensity scale.
+    threshold : float
+        Error-to-truth power ratio that counts as unresolved.
 
+    Returns
+    -------
+    float
+        :func:`metasensor.metrics.spectral.resolved_frequency` of the region.
+    """
+    from metasensor.metrics.spectral import resolved_frequency as spectral_resolved
 
-def resolved_frequency(image, truth, threshold: float = 0.2, rings: int = 32,
-                       min_energy: float = 1e-3) -> float:
-    """Resolved frequency (cycles/pixel, at most 0.5) of ``image`` against ``truth`` (same
-    shape, same intensity scale) in that region (module docstring)."""
     img, tru = np.asarray(image, float), np.asarray(truth, float)
     if img.shape != tru.shape or img.ndim != 2 or min(img.shape) < 16:
         raise ValueError(f"image and truth must be equal 2-D regions >= 16 px, got "
                          f"{img.shape} and {tru.shape}")
-    fi, ft = _spectrum(img), _spectrum(tru)
-    fy = np.fft.fftfreq(img.shape[0])[:, None]
-    fx = np.fft.fftfreq(img.shape[1])[None, :]
-    fr = np.hypot(fy, fx)
-    edges = np.linspace(0.0, 0.5, rings + 1)
-    total = (np.abs(ft) ** 2).sum()
-    last = 0.0
-    for lo, hi in zip(edges[:-1], edges[1:], strict=True):
-        ring = (fr >= lo) & (fr < hi) & (fr > 0)
-        power = (np.abs(ft[ring]) ** 2).sum()
-        if power < min_energy * total / rings:
-            continue
-        t = float(np.real((fi[ring] * np.conj(ft[ring])).sum()) / power)
-        if t < threshold:
-            return last
-        last = float(hi)
-    return last
+    return spectral_resolved(img, tru, threshold)
 
 
 def field_resolution(image, truth, grid: tuple[int, int] = (4, 4), **kw) -> np.ndarray:
