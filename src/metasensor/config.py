@@ -27,6 +27,7 @@ RANGES = {"mla_pitch": (1e-6, 1e-2), "mla_focal": (1e-6, 1.0), "wavelength": (1e
 MAX_NNUM = 63  # pixels per lenslet (the prototype: 15)
 MAX_NA = 0.95  # image-side numerical aperture (the prototype: 0.05)
 _MOVING = ("mla", "image")
+_APODIZATIONS = ("none", "aplanatic")
 
 
 # optics a TOML should set for its own system; missing ones fall back to the prototype's
@@ -101,6 +102,10 @@ class SystemConfig:
         MLA moves (``moving="mla"``); any period when the image moves over a fixed MLA.
     magnification : lateral magnification of the main lens (object to image), for object-side
         conversions.
+    apodization : pupil amplitude law: ``"none"`` (uniform, the paraxial model, default) or
+        ``"aplanatic"`` (a lens obeying the sine condition imaging an isotropic point source,
+        object-side NA ``na * magnification``: intensity per unit pupil area ``1 / cos θ``;
+        :func:`metasensor.optics.pupil.aplanatic_amplitude`).
     focal_length, focus_distance : main-lens focal length and object focus distance [m]
         (optional; needed only for metric depth).
     sensor_shape : (rows, columns) of the full sensor.
@@ -132,6 +137,7 @@ class SystemConfig:
     sensor_shape: tuple[int, int] = field(default=(6004, 7920))
     bit_depth: int = 12
     moving: str = "mla"
+    apodization: str = "none"
 
     def __post_init__(self) -> None:
         if isinstance(self.sensor_shape, list):
@@ -181,6 +187,12 @@ class SystemConfig:
             raise ConfigError(f"obstruction must lie in [0, 1), got {self.obstruction!r}")
         if not isinstance(self.scan, int) or isinstance(self.scan, bool) or self.scan < 1:
             raise ConfigError(f"scan must be a positive integer, got {self.scan!r}")
+        if self.apodization not in _APODIZATIONS:
+            raise ConfigError(f"apodization must be 'none' or 'aplanatic', got "
+                              f"{self.apodization!r:.40}")
+        if self.apodization == "aplanatic" and not self.na * self.magnification < 1.0:
+            raise ConfigError(f"apodization 'aplanatic' needs an object-side NA below 1, got "
+                              f"na * magnification = {self.na * self.magnification:g}")
         if self.moving not in _MOVING:
             raise ConfigError(f"moving must be 'mla' or 'image', got {self.moving!r}")
         if self.moving == "mla" and self.nnum % self.scan != 0:
@@ -409,4 +421,6 @@ class SystemConfig:
         """Hash of the parameters that shape the PSFs only (not scan, sensor size, bit depth,
         magnification or main-lens geometry), so PSF caches are shared across scan periods."""
         optical = {k: getattr(self, k) for k in self._OPTICAL_FIELDS}
+        if self.apodization != "none":  # the object-side NA shapes the pupil too
+            optical.update(apodization=self.apodization, magnification=self.magnification)
         return hashlib.sha256(json.dumps(optical, sort_keys=True).encode()).hexdigest()[:16]

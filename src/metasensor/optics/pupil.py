@@ -9,6 +9,7 @@ in samples, so the grid is symmetric about rho = 0. Amplitudes are returned as f
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 
 import numpy as np
@@ -20,6 +21,7 @@ __all__ = [
     "pupil_grid",
     "disk_fraction",
     "pupil_amplitude",
+    "aplanatic_amplitude",
     "defocus_waves",
     "pupil_phase",
     "view_to_pupil_map",
@@ -76,6 +78,42 @@ def view_to_pupil_map(cfg: SystemConfig, rho_x, rho_y) -> tuple[np.ndarray, np.n
     return u, v
 
 
+def aplanatic_amplitude(rho_x, rho_y, na_object: float) -> np.ndarray:
+    """Pupil amplitude of an aplanatic lens collecting an isotropic point source.
+
+    Model: a lens obeying the sine condition maps the ray at object-side angle θ to the pupil
+    radius ``rho = sin θ / NA_o``; an isotropic source puts equal energy into equal solid
+    angles, ``dΩ = sin θ dθ dφ ∝ rho drho dφ / cos θ``, so the energy per unit pupil area is
+    proportional to ``1 / cos θ = (1 − NA_o² rho²)^(−1/2)`` and the amplitude to its square
+    root (Richards & Wolf, Proc. R. Soc. A 253, 358 (1959); the ``sqrt(cos θ)`` factor of the
+    Debye integral over θ in Broxton et al., Opt. Express 21, 25418 (2013), is the same law).
+    The amplitude is scaled to unit mean intensity over the unit disk, whose exact mean of
+    ``1 / cos θ`` is ``2 (1 − sqrt(1 − NA_o²)) / NA_o²``, so the pupil's total energy, and with
+    it the photon normalisation of a PSF, is that of the uniform pupil.
+
+    Parameters
+    ----------
+    rho_x, rho_y : array_like
+        Normalised pupil coordinates (``|rho| = 1`` at the pupil edge).
+    na_object : float
+        Object-side numerical aperture ``NA_o`` in (0, 1) (the image-side NA times the
+        magnification for a lens in air).
+
+    Returns
+    -------
+    numpy.ndarray
+        Amplitude (float64, same shape as ``rho_x``); values outside the disk are those of
+        ``|rho| = 1`` clipped there (the caller's disk mask removes them).
+    """
+    if not 0.0 < float(na_object) < 1.0:
+        raise ValueError(f"na_object must lie in (0, 1), got {na_object!r}")
+    s2 = float(na_object) ** 2
+    r2 = np.minimum(np.asarray(rho_x, dtype=np.float64) ** 2
+                    + np.asarray(rho_y, dtype=np.float64) ** 2, 1.0)
+    mean = 2.0 * (1.0 - math.sqrt(1.0 - s2)) / s2
+    return (1.0 - s2 * r2) ** -0.25 / math.sqrt(mean)
+
+
 def pupil_amplitude(cfg: SystemConfig, rho_x, rho_y, step: float,
                     amplitude: np.ndarray | PupilFn | None = None) -> np.ndarray:
     """Pupil amplitude on the grid (edge cells area-weighted over ``step``, the cell side in rho).
@@ -85,13 +123,19 @@ def pupil_amplitude(cfg: SystemConfig, rho_x, rho_y, step: float,
       nearest view), inside the NA circle;
     - a callable ``f(rho_x, rho_y) -> amplitude``, inside the NA circle.
 
+    With ``cfg.apodization == "aplanatic"`` every case is multiplied by
+    :func:`aplanatic_amplitude` at the object-side NA ``cfg.na * cfg.magnification``.
+
     Edge cells carry the fraction of their area inside the pupil (the box-filtered disk), so
     the pupil's sum (the field at the focus) equals its area exactly; its energy ``sum A**2``
     is then a little smaller (about 0.33 / radius relative): the far diffraction tail that the
     finite grid cannot hold.
     """
+    apod = 1.0
+    if cfg.apodization == "aplanatic":
+        apod = aplanatic_amplitude(rho_x, rho_y, cfg.na * cfg.magnification)
     if amplitude is None:
-        return disk_fraction(rho_x, rho_y, step, inner=cfg.obstruction)
+        return apod * disk_fraction(rho_x, rho_y, step, inner=cfg.obstruction)
     disk = disk_fraction(rho_x, rho_y, step)
     if callable(amplitude):
         a = np.asarray(amplitude(rho_x, rho_y), dtype=np.float64)
@@ -108,7 +152,7 @@ def pupil_amplitude(cfg: SystemConfig, rho_x, rho_y, step: float,
         a = amap[u, v]
     if not np.isfinite(a).all() or (a < 0).any():
         raise ValueError("amplitude must be finite and non-negative")
-    return a * disk
+    return a * disk * apod
 
 
 def defocus_waves(cfg: SystemConfig, rho_x, rho_y, depth: float) -> np.ndarray:
