@@ -110,3 +110,26 @@ def test_calibrate_aberration_writes_beside_its_input(tmp_path, monkeypatch):
     assert res.exit_code == 0, res.output
     assert (tmp_path / "data" / "checker_system.h5").is_file()
     assert not (tmp_path / "system.h5").exists()
+
+
+@pytest.mark.parametrize("command", [["reconstruct", "views.tif"], ["demo"],
+                                     ["calibrate-aberration", "views.tif"]])
+@pytest.mark.parametrize("text", ["4", "4x", "0x3", "3x-1"])
+def test_one_grid_syntax_everywhere(tmp_path, command, text):
+    """Every ``--blocks`` reads ``4x4`` through one parser, positivity included."""
+    from metasensor.cli_options import parse_pair
+
+    with pytest.raises(ValueError, match="--blocks must"):
+        parse_pair(text, "--blocks")
+    views = tmp_path / "views.tif"
+    if len(command) > 1:
+        from metasensor.config import SystemConfig
+        from metasensor.io.views import write_views
+
+        cfg = SystemConfig(nnum=5, scan=5)
+        write_views(views, np.ones((5, 5, 8, 8), np.float32), cfg)
+        command = [command[0], str(views)]
+    res = CliRunner().invoke(cli.app, [*command, "--blocks", text, "--out",
+                                       str(tmp_path / "out")])
+    assert isinstance(res.exception, ValueError), res.output
+    assert str(res.exception).startswith("--blocks must"), res.exception

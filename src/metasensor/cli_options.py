@@ -1,14 +1,20 @@
 """Conventions shared by every ``metasensor`` command: one scan-order syntax (and one option
-name, ``--scan-order``, with ``--order`` kept as an alias), and ``--out``/``-o`` for outputs.
+name, ``--scan-order``, with ``--order`` kept as an alias), one grid syntax (``4x4``),
+``--out``/``-o`` for outputs, and commands declared as one frozen dataclass of their options
+(:func:`typed_command`).
 
 ``tests/test_cli_conventions.py`` checks every registered command against them.
 """
 
 from __future__ import annotations
 
+import inspect
 import re
+from collections.abc import Callable
+from typing import Any
 
-__all__ = ["SCAN_ORDER_SYNTAX", "SCAN_ORDER_HELP", "SCAN_ORDER_NAMES", "parse_scan_order"]
+__all__ = ["SCAN_ORDER_SYNTAX", "SCAN_ORDER_HELP", "SCAN_ORDER_NAMES", "parse_scan_order",
+           "parse_pair", "typed_command"]
 
 SCAN_ORDER_NAMES = ("--scan-order", "--order")
 SCAN_ORDER_SYNTAX = ("row-major, serpentine, spiral, or the (row,col) phases in acquisition "
@@ -87,3 +93,50 @@ def parse_scan_order(text: str | None, period: int | None = None, *,
         return check_scan_order(pairs, period or period_of(pairs))
     except ValueError as exc:
         raise ValueError(f"--scan-order: {exc}; use {SCAN_ORDER_SYNTAX}") from None
+
+
+def parse_pair(text: str, name: str) -> tuple[int, int]:
+    """A grid option's ``"4x4"`` → (4, 4), both positive integers.
+
+    Parameters
+    ----------
+    text : str
+        ``"<rows>x<cols>"`` (case-insensitive ``x``).
+    name : str
+        The option, named in the error (e.g. ``"--blocks"``).
+
+    Returns
+    -------
+    (int, int)
+
+    Raises
+    ------
+    ValueError
+        One line naming ``name`` when the text is not two integers or one is below 1.
+    """
+    try:
+        a, b = (int(t) for t in str(text).lower().split("x"))
+    except ValueError:
+        raise ValueError(f"{name} must look like 4x4, got {text!r}") from None
+    if a < 1 or b < 1:
+        raise ValueError(f"{name} must be positive, got {text!r}")
+    return a, b
+
+
+def typed_command(args_type: type, run: Callable[[Any], None]) -> Callable[..., None]:
+    """A typer command whose options are the fields of the frozen dataclass ``args_type``.
+
+    Each field is declared as ``name: Annotated[type, typer.Option(...)] = default`` (or
+    ``typer.Argument``); the command's signature is the dataclass's, so typer (and the napari
+    forms built from the click parameters) see one parameter per field, and the command's
+    body is ``run(args_type(**given))``: the options arrive parsed and validated in one
+    object. ``run``'s docstring is the command's help.
+    """
+
+    def command(**given: Any) -> None:
+        run(args_type(**given))
+
+    command.__signature__ = inspect.signature(args_type, eval_str=True)  # type: ignore[attr-defined]
+    command.__doc__ = run.__doc__
+    command.__name__ = run.__name__
+    return command

@@ -148,7 +148,7 @@ def test_cli_system_aberration_file_sets_the_field_map(files):
 
 def test_figure_preview_block_averages_large_fields():
     # a sensor-sized field (5,985 x 7,905 px) is drawn as its 4 x 4 block means (<= 2,048 px)
-    from metasensor.recon.commands import PREVIEW_PX, _block_mean, _preview_factor
+    from metasensor.recon.outputs import PREVIEW_PX, _block_mean, _preview_factor
 
     assert _preview_factor((5985, 7905)) == 4
     assert max(5985, 7905) // _preview_factor((5985, 7905)) <= PREVIEW_PX
@@ -165,7 +165,7 @@ def test_figure_preview_block_averages_large_fields():
 def test_centre_view_preview_equals_block_mean_of_the_upsampled_view(d, f):
     # the centre view is drawn up-sampled x d and block-averaged f x f; computed without the
     # up-sampled copy, it equals doing both (float32: 1e-6 relative)
-    from metasensor.recon.commands import _block_mean, _upsampled_block_mean
+    from metasensor.recon.outputs import _block_mean, _upsampled_block_mean
 
     view = np.random.default_rng(0).random((23, 31)).astype(np.float32)
     ref = _block_mean(np.kron(view, np.ones((d, d), np.float32)), f)

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import typer
 
-from metasensor.recon.blocks import parse_pair
+from metasensor.cli_options import parse_pair
 
 __all__ = ["register"]
 

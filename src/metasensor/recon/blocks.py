@@ -18,19 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 __all__ = ["Block", "split_blocks", "block_weights", "block_centre_normalised", "Stitcher",
-           "block_zernikes", "parse_pair"]
-
-
-def parse_pair(text: str, name: str) -> tuple[int, int]:
-    """A command line's ``"4x4"`` → (4, 4), both positive; a one-line error naming the option
-    ``name`` otherwise."""
-    try:
-        a, b = (int(t) for t in str(text).lower().split("x"))
-    except ValueError:
-        raise ValueError(f"{name} must look like 4x4, got {text!r}") from None
-    if a < 1 or b < 1:
-        raise ValueError(f"{name} must be positive, got {text!r}")
-    return a, b
+           "block_zernikes"]
 
 
 @dataclass(frozen=True)

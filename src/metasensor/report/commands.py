@@ -54,10 +54,9 @@ def register(app: typer.Typer) -> None:
             typer.echo(f"report: {Path(out) / 'index.html'} ({summary['seconds']:.0f} s)")
             return
 
-        try:
-            by, bx = (int(v) for v in blocks.lower().split("x"))
-        except ValueError:
-            raise ValueError(f"--blocks must look like 4x4, got {blocks!r}") from None
+        from metasensor.cli_options import parse_pair
+
+        by, bx = parse_pair(blocks, "--blocks")
 
         def say(message, *_args, **_kwargs) -> None:  # a warning: one line, before the wait
             typer.echo(f"warning: {message}", err=True)
