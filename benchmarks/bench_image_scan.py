@@ -38,8 +38,8 @@ def _scores(image, truth) -> dict:
     from metasensor.metrics import psnr, ssim
 
     rng = float(truth.max() - truth.min())
-    return {"ssim": ssim(image, truth, data_range=rng),
-            "psnr_db": psnr(image, truth, data_range=rng)}
+    return {"ssim": ssim(truth=truth, image=image, data_range=rng),
+            "psnr_db": psnr(truth=truth, image=image, data_range=rng)}
 
 
 def prototype(lenslets: int) -> dict:
