@@ -133,3 +133,16 @@ def test_one_grid_syntax_everywhere(tmp_path, command, text):
                                        str(tmp_path / "out")])
     assert isinstance(res.exception, ValueError), res.output
     assert str(res.exception).startswith("--blocks must"), res.exception
+
+
+def test_every_scheduler_option_says_it_trusts_the_scheduler():
+    """dask.distributed exchanges pickles over unauthenticated TCP: each ``--scheduler`` help
+    says so and names the remedy."""
+    found = []
+    for name, cmd in _commands().items():
+        opt = _option(cmd, "--scheduler")
+        if opt is not None:
+            found.append(name)
+            text = " ".join((opt.help or "").split())
+            assert "unauthenticated TCP" in text and "tls://" in text, (name, text)
+    assert sorted(found) == ["demo", "reconstruct"]

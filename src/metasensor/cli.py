@@ -124,14 +124,25 @@ def _fail(message: str, code: int) -> None:
 
 
 def main() -> None:
-    """Entry point: run the app; bad input exits non-zero with one line naming the problem."""
+    """Entry point: run the app; bad input exits non-zero with one line naming the problem;
+    Ctrl-C and SIGTERM exit 130 and 143 with one line, temporaries removed."""
+    from metasensor.io.interrupt import handle_termination
+
+    with handle_termination():  # SIGTERM as Ctrl-C: temporaries removed on the way out
+        _run()
+
+
+def _run() -> None:
+    import signal
     import sys
 
     try:  # typer >= 0.2x vendors click as typer._click; older ones use click itself
         from typer._click import exceptions as click
     except ImportError:  # pragma: no cover
         from click import exceptions as click
+    from metasensor.io.interrupt import received, taken
 
+    since = taken()
     try:
         code = app(standalone_mode=False)
     except click.NoArgsIsHelpError as exc:  # bare group call: the help, as asked
@@ -142,6 +153,8 @@ def main() -> None:
         _fail(f"{where}{exc.format_message()}", 2)
     except typer.Abort:
         _fail("aborted", 1)
+    except KeyboardInterrupt:  # typer turns it into exit 130 itself; said below
+        code = 130
     except (ValueError, TypeError, FileNotFoundError, OSError) as exc:
         _fail(str(exc), 2)
     except MemoryError as exc:  # e.g. an absurd --size or aberration: say so, in one line
@@ -149,6 +162,10 @@ def main() -> None:
     except RuntimeError as exc:  # corrupt chunks of a store, backend failures: one line
         first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         _fail(first, 1)
+    signum = received(since)
+    if code == 130 and signum is not None:  # the shell's convention: 128 + the signal
+        name = "SIGTERM" if signum == signal.SIGTERM else "Ctrl-C (SIGINT)"
+        _fail(f"stopped by {name}; unfinished outputs were removed", 128 + signum)
     from metasensor.config import say_fallbacks
 
     say_fallbacks()  # optics a configuration file left to the prototype: said once

@@ -66,7 +66,12 @@ def _hidden(root: Path) -> list[str]:
     return sorted(p.name for p in root.iterdir() if p.name.startswith("."))
 
 
-@pytest.mark.slow  # a writer now and then outlives its Ctrl-C inside zarr's I/O wait
+def test_an_interrupted_writer_leaves_complete_outputs_or_none(tmp_path):
+    # the default suite's share: one Ctrl-C early in a pass, one kill -9 later
+    _interrupt_writers(tmp_path, ((0.05, signal.SIGINT), (0.6, signal.SIGKILL)))
+
+
+@pytest.mark.slow  # four interpreters: ~17 s at a load of 6 on 2 cores
 def test_interrupted_writers_leave_complete_outputs_or_none(tmp_path):
     # interrupt points after start, each writer at another; Ctrl-C and kill -9
     _interrupt_writers(tmp_path, ((0.05, signal.SIGINT), (0.3, signal.SIGKILL),

@@ -23,6 +23,8 @@ import shutil
 from collections.abc import Iterable, Iterator
 from pathlib import Path
 
+from metasensor.io import interrupt
+
 __all__ = ["atomic_path", "atomic_write_text", "atomic_write_bytes", "refuse_overwrite",
            "result_folder", "StagedFolder", "replace_tree", "sibling_name", "remove_stale",
            "is_own_zarr", "discard_tree", "staged_zarr", "write_error"]
@@ -118,6 +120,7 @@ def atomic_path(path: str | Path, suffix: str | None = None) -> Iterator[Path]:
     path = Path(path)
     if path.is_dir():
         raise IsADirectoryError(f"cannot write {path}: it is a folder")
+    since = interrupt.watch()
     tmp_path = path.parent / sibling_name(path, "tmp", suffix=suffix if suffix is not None
                                           else path.suffix)
     try:
@@ -131,6 +134,7 @@ def atomic_path(path: str | Path, suffix: str | None = None) -> Iterator[Path]:
             yield tmp_path
             if tmp_path.is_file():
                 _umask_mode(tmp_path)
+            interrupt.check(since)  # a Ctrl-C something swallowed: nothing put in place
             os.replace(tmp_path, path)
         except OSError as exc:
             if str(path) in str(exc):  # already names the file
@@ -276,6 +280,7 @@ def staged_zarr(path: str | Path) -> Iterator[Path]:
     ``OSError`` becomes one line naming ``path`` (:func:`write_error`).
     """
     path = Path(path)
+    since = interrupt.watch()
     if path.exists() and not is_own_zarr(path):
         raise ValueError(f"{path} exists and is not a Zarr store written by metasensor: not "
                          "replaced")
@@ -287,6 +292,7 @@ def staged_zarr(path: str | Path) -> Iterator[Path]:
     tmp = path.parent / sibling_name(path, "tmp", suffix=".zarr")  # unique per run
     try:
         yield tmp
+        interrupt.check(since)  # a Ctrl-C something swallowed: nothing put in place
         replace_tree(tmp, path)  # the old store renamed away, the new one in, then old deleted
     except BaseException as exc:
         discard_tree(tmp)  # no half-written store left behind
@@ -319,6 +325,7 @@ class StagedFolder:
         if self.out.exists() and not self.out.is_dir():
             raise ValueError(f"--out {self.out} exists and is not a folder")
         self.path = self.out.parent / sibling_name(self.out, "tmp")
+        self._since = interrupt.watch()
         _on_exit(self.discard)  # before the folder exists: no moment without a cleanup
         try:
             self.out.parent.mkdir(parents=True, exist_ok=True)
@@ -334,6 +341,7 @@ class StagedFolder:
     def commit(self) -> Path:
         """Put the built folder in place; returns the final folder."""
         out, stage = self.out, self.path
+        interrupt.check(self._since)  # a Ctrl-C something swallowed: nothing put in place
         try:
             foreign = set(os.listdir(out)) - self.names if out.is_dir() else set()
             here = Path(os.getcwd())

@@ -22,7 +22,7 @@ from pathlib import Path
 
 from metasensor.io.atomic import _on_exit, command_context, is_own_zarr, sibling_name
 
-__all__ = ["guard", "npy_argument", "OutputLocked"]
+__all__ = ["guard", "npy_argument", "OutputLocked", "remove_free_lock"]
 
 _held: list[tuple[int, Path, tuple]] = []
 
@@ -170,17 +170,20 @@ def guard(inputs: Iterable, outputs: Iterable, *, folders: Iterable = (),
 
 
 def _lock_all(paths: list[Path]) -> None:
+    from metasensor.io.interrupt import blocked
+
     taken = []
-    try:
-        for p in paths:
-            taken.append(_lock(p))
-    except BaseException:
-        for item in reversed(taken):  # last made, first removed
-            _release(item)
-        raise
-    _held.extend(taken)
-    # released however the command ends, the last taken first
-    _on_exit(lambda: [_release(t) for t in reversed(taken) if t in _held])
+    with blocked():  # Ctrl-C waits until every lock made is registered for its release
+        try:
+            for p in paths:
+                taken.append(_lock(p))
+        except BaseException:
+            for item in reversed(taken):  # last made, first removed
+                _release(item)
+            raise
+        _held.extend(taken)
+        # released however the command ends, the last taken first
+        _on_exit(lambda: [_release(t) for t in reversed(taken) if t in _held])
 
 
 def _lock(p: Path) -> tuple[int, Path, tuple]:
@@ -232,3 +235,30 @@ def _release(item: tuple[int, Path, tuple]) -> None:
     for d in made:  # folders made only for the lock, left empty by a failed run
         with contextlib.suppress(OSError):
             d.rmdir()
+
+
+def remove_free_lock(p: str | os.PathLike) -> bool:
+    """Remove the lock file beside output ``p`` (``.<name>.lock``) if no process holds it (a run
+    ended by force left it); a held lock is never touched. Returns whether one was removed."""
+    import fcntl
+
+    p = Path(os.path.abspath(p))
+    lock = p.parent / sibling_name(p, "lock", pid=False)
+    try:
+        fd = os.open(lock, os.O_RDWR)
+    except OSError:
+        return False
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:
+        os.close(fd)
+        return False  # a live run holds it
+    try:  # held by us now: unlinked before release, as a finishing run does
+        if os.fstat(fd).st_ino != os.stat(lock).st_ino:
+            return False  # replaced meanwhile by another run's: not ours to remove
+        lock.unlink()
+        return True
+    except OSError:
+        return False
+    finally:
+        os.close(fd)

@@ -57,7 +57,9 @@ def _zarr(path: Path) -> list[str]:
         arr, meta = read_ome_zarr(path)
         lines = [f"kind: OME-Zarr {meta.get('kind', '')}".rstrip()]
     else:
-        import zarr
+        from metasensor.io.interrupt import quiet_zarr
+
+        zarr = quiet_zarr()  # Ctrl-C reaches the main thread
 
         arr = zarr.open_array(str(path), mode="r")
         meta = dict(arr.attrs)

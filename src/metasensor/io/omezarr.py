@@ -32,10 +32,13 @@ def write_ome_zarr(path: str | Path, array: np.ndarray, pixel_m: float | None, m
     metadata stored under ``"metasensor"``; ``levels``: pyramid levels (default: 2× steps
     while the smaller side stays >= 64 px; 1 for view stacks).
     """
-    import zarr
     from ome_zarr.io import parse_url
     from ome_zarr.scale import Methods
     from ome_zarr.writer import write_image
+
+    from metasensor.io.interrupt import quiet_zarr
+
+    zarr = quiet_zarr()  # Ctrl-C reaches the main thread
 
     path = Path(path)
     array = np.asarray(array)
@@ -74,7 +77,10 @@ def read_ome_zarr(path: str | Path):
     """(full-resolution array, the ``"metasensor"`` metadata) of a store written by
     :func:`write_ome_zarr`; view stacks come back as a lazy dask array (n, n, H, W)."""
     import dask.array as da
-    import zarr
+
+    from metasensor.io.interrupt import quiet_zarr
+
+    zarr = quiet_zarr()  # Ctrl-C reaches the main thread
 
     path = Path(path)
     try:

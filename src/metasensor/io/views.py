@@ -114,9 +114,10 @@ def _imagej_tags(views: np.ndarray, cfg: SystemConfig | None, text: str
 def _write_zarr(path: Path, views: np.ndarray, meta: dict) -> Path:
     """Write the store under a unique temporary name, then swap it in (:func:`replace_tree`);
     an existing folder is replaced only if it is a metasensor Zarr store."""
-    import zarr
-
     from metasensor.io.atomic import staged_zarr
+    from metasensor.io.interrupt import quiet_zarr
+
+    zarr = quiet_zarr()  # Ctrl-C reaches the main thread
 
     with staged_zarr(path) as tmp:
         arr = zarr.open_array(str(tmp), mode="w-", shape=views.shape, dtype=views.dtype,
@@ -129,7 +130,9 @@ def _write_zarr(path: Path, views: np.ndarray, meta: dict) -> Path:
 
 def _open_zarr(path: Path):
     """The array of a Zarr view store, read-only; one ``ValueError`` line if there is none."""
-    import zarr
+    from metasensor.io.interrupt import quiet_zarr
+
+    zarr = quiet_zarr()  # Ctrl-C reaches the main thread
 
     try:
         return zarr.open_array(str(path), mode="r")

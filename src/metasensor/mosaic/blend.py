@@ -49,7 +49,7 @@ def feather(shape: tuple[int, int], ramp: int) -> np.ndarray:
 
 def _chunk(block_info=None, *, tiles, positions, ramp, out_dtype):
     """One output chunk: weighted mean of the resampled tiles that cover it."""
-    import zarr
+    import zarr  # in a worker thread: the loop is started by blend_tiles
     from scipy import ndimage
 
     (y0, y1), (x0, x1) = block_info[None]["array-location"]
@@ -133,7 +133,10 @@ def blend_tiles(tiles: dict, positions: dict, shape: tuple[int, int], out: str |
     """
     import dask
     import dask.array as da
-    import zarr
+
+    from metasensor.io.interrupt import quiet_zarr
+
+    zarr = quiet_zarr()  # Ctrl-C reaches the main thread
 
     out = Path(out)
     if out.exists() and not _own_mosaic(out):
@@ -193,6 +196,8 @@ def blend_tiles(tiles: dict, positions: dict, shape: tuple[int, int], out: str |
 
 def open_mosaic(path: str | Path, level: int = 0):
     """The Zarr array of one pyramid level of a mosaic written by :func:`blend_tiles`."""
-    import zarr
+    from metasensor.io.interrupt import quiet_zarr
+
+    zarr = quiet_zarr()  # Ctrl-C reaches the main thread
 
     return zarr.open_array(str(Path(path)), mode="r", path=str(level))

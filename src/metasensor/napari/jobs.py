@@ -187,9 +187,7 @@ class Job:
                 self._proc.kill()
                 self._proc.wait()
             shutil.rmtree(self.staging, ignore_errors=True)
-            for left in self.staging.parent.glob(f".{self.staging.name}*"):  # e.g. a lock file
-                if left.is_file():  # a command ended by force leaves beside its output
-                    left.unlink(missing_ok=True)
+            clear_leftovers(self.staging)
 
     def _publish(self, stdout: str) -> None:
         """Record the run in summary.json, then move the staged outputs into the chosen folder
@@ -226,6 +224,20 @@ class Job:
             if target.is_dir():
                 shutil.rmtree(target)
             os.replace(self.staging / name, target)
+
+
+def clear_leftovers(out: Path) -> list[Path]:
+    """Remove what a command ended by force left beside its output ``out``: temporaries of a
+    process that no longer exists (:func:`metasensor.io.atomic.remove_stale`) and a lock no
+    process holds (:func:`metasensor.io.guard.remove_free_lock`). A live run's lock or
+    temporary is never removed. Returns the paths removed."""
+    from metasensor.io.atomic import remove_stale, sibling_name
+    from metasensor.io.guard import remove_free_lock
+
+    removed = remove_stale(out)
+    if remove_free_lock(out):
+        removed.append(out.parent / sibling_name(out, "lock", pid=False))
+    return removed
 
 
 def _pump(stream, chunks: queue.Queue) -> None:

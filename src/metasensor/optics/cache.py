@@ -140,7 +140,10 @@ def store(key: str, array: np.ndarray, folder: Path | None = None) -> Path | Non
     the size cap (:func:`max_bytes`); returns the path (``None`` if not writable)."""
     limit = max_bytes()
     path = _path(key, folder)
+    from metasensor.io import interrupt
     from metasensor.io.atomic import remove_stale, sibling_name
+
+    since = interrupt.watch()
 
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
@@ -152,6 +155,7 @@ def store(key: str, array: np.ndarray, folder: Path | None = None) -> Path | Non
     try:
         with os.fdopen(fd, "wb") as fh:
             np.save(fh, np.ascontiguousarray(array), allow_pickle=False)
+        interrupt.check(since)  # a swallowed Ctrl-C: no entry put in place
         os.replace(tmp, path)
     except BaseException as exc:
         with contextlib.suppress(OSError):

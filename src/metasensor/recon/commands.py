@@ -59,8 +59,8 @@ class ReconstructArgs:
     field_zernike: Annotated[_Path, typer.Option(
         "--field-zernike", help=".npy (by, bx, J) Noll vectors over the field")] = None
     scheduler: Annotated[str | None, typer.Option(
-        help="dask scheduler address tcp://host:port (trusted: dask exchanges pickles; use a "
-        "private network or tls://)")] = None
+        help="dask scheduler address tcp://host:port (trusted: dask exchanges pickles over "
+        "unauthenticated TCP; use a private network or tls://)")] = None
     device: Annotated[str | None, typer.Option(
         help="cpu or cuda (default: cuda if present)")] = None
     zarr_out: Annotated[bool, typer.Option(
@@ -104,11 +104,11 @@ def _recon_options(args: ReconstructArgs, bank, target):
 
 def _zarr_target(args: ReconstructArgs, cfg, stack):
     """The staged output folder and the zarr array in it that the blocks are stitched into."""
-    import zarr
-
     from metasensor.io.atomic import StagedFolder
+    from metasensor.io.interrupt import quiet_zarr
     from metasensor.recon.outputs import RESULT_FILES
 
+    zarr = quiet_zarr()  # Ctrl-C reaches the main thread
     d = cfg.scan_step_px
     shape = (stack.shape[2] * d, stack.shape[3] * d)
     staged = StagedFolder(args.out, RESULT_FILES)  # complete, or not at all
@@ -167,8 +167,9 @@ def run_reconstruct(args: ReconstructArgs) -> None:
         staged.path, rec, stack, inputs.origin, provenance=args.provenance(cfg))]
     staged.commit()
     if target is not None:
-        import zarr
+        from metasensor.io.interrupt import quiet_zarr
 
+        zarr = quiet_zarr()  # Ctrl-C reaches the main thread
         rec.image = zarr.open_array(str(args.out / "image.zarr"), mode="r")
         written.insert(1, args.out / "image.zarr")
     _say_done(rec, written)

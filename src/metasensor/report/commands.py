@@ -24,7 +24,10 @@ def register(app: typer.Typer) -> None:
                                           "gigapixel (the paper's Figs. 3, 5 and ED Fig. 7)"),
         scheduler: str = typer.Option(None, "--scheduler",
                                       help="gigapixel: Dask scheduler address "
-                                           "(tcp://host:8786); default local threads"),
+                                           "(tcp://host:8786); default local threads. "
+                                           "Trusted: dask exchanges pickles over "
+                                           "unauthenticated TCP; use a private network or "
+                                           "tls://"),
     ) -> None:
         """Simulate the built-in resolution chart through a cheap single lens, reconstruct it,
         and write a report (PNG figures, index.html, summary.json); or run one of the paper's

@@ -70,7 +70,9 @@ def _sample(big: np.ndarray, origin: tuple[float, float], shape: tuple[int, int]
 
 
 def _write_tile(path: Path, image: np.ndarray) -> str:
-    import zarr
+    from metasensor.io.interrupt import quiet_zarr
+
+    zarr = quiet_zarr()  # Ctrl-C reaches the main thread
 
     z = zarr.open_array(str(path), mode="w", shape=image.shape, chunks=(128, 128),
                         dtype="f4", zarr_format=2)
@@ -184,6 +186,8 @@ def run_gigapixel(out: str | Path, settings: GigapixelSettings | None = None,
 
 def open_mosaic_array(path: str) -> np.ndarray:
     """A tile written by this scenario, read into memory (tiles are small in the demo)."""
-    import zarr
+    from metasensor.io.interrupt import quiet_zarr
+
+    zarr = quiet_zarr()  # Ctrl-C reaches the main thread
 
     return np.asarray(zarr.open_array(path, mode="r")[:])
