@@ -115,73 +115,72 @@ def run_gigapixel(out: str | Path, settings: GigapixelSettings | None = None,
                            + s.tile))
     rng = np.random.default_rng(s.seed)
     true_pos, meta_paths, s2d_paths, scale = {}, {}, {}, None
-    steps = tqdm(total=len(layout.indices) + 1, desc="gigapixel", disable=not progress)
-    for k in layout.indices:
-        oy, ox = layout.origin(k)
-        err = (0.0, 0.0) if k == (0, 0) else tuple(rng.uniform(-s.jitter, s.jitter, 2))
-        true_pos[k] = (oy + err[0], ox + err[1])
-        # the sensor's pixel (0, 0) sits o pixels before the tile image's (0, 0)
-        scene = _sample(big, (margin + true_pos[k][0] - o, margin + true_pos[k][1] - o),
-                        (s.tile, s.tile))
-        fz_sim = layout.tile_field_zernike(fz_lens, k, (s.tile, s.tile),
-                                           offset=(err[0] - o, err[1] - o))
-        cap = ms.simulate(scene, cfg, field_zernike=fz_sim, snr_db=s.snr_db,
-                          seed=s.seed + 1 + layout.indices.index(k), field_blocks=s.blocks,
-                          scale=scale)
-        scale = cap.scale
-        views = ms.realign(cap.frames, cap.config, cap.scan_order)
-        rec = ms.reconstruct(views, cap.config, blocks=s.blocks, iterations=s.iterations,
-                             field_zernike=layout.tile_field_zernike(fz_lens, k))
-        meta_paths[k] = _write_tile(out / "tiles" / f"meta_{k[0]}_{k[1]}.zarr",
-                                    np.asarray(rec.image))
-        s2d_paths[k] = _write_tile(out / "tiles" / f"sensor2d_{k[0]}_{k[1]}.zarr", cap.sensor2d)
+    with tqdm(total=len(layout.indices) + 1, desc="gigapixel", disable=not progress) as steps:
+        for k in layout.indices:
+            oy, ox = layout.origin(k)
+            err = (0.0, 0.0) if k == (0, 0) else tuple(rng.uniform(-s.jitter, s.jitter, 2))
+            true_pos[k] = (oy + err[0], ox + err[1])
+            # the sensor's pixel (0, 0) sits o pixels before the tile image's (0, 0)
+            scene = _sample(big, (margin + true_pos[k][0] - o, margin + true_pos[k][1] - o),
+                            (s.tile, s.tile))
+            fz_sim = layout.tile_field_zernike(fz_lens, k, (s.tile, s.tile),
+                                               offset=(err[0] - o, err[1] - o))
+            cap = ms.simulate(scene, cfg, field_zernike=fz_sim, snr_db=s.snr_db,
+                              seed=s.seed + 1 + layout.indices.index(k), field_blocks=s.blocks,
+                              scale=scale)
+            scale = cap.scale
+            views = ms.realign(cap.frames, cap.config, cap.scan_order)
+            rec = ms.reconstruct(views, cap.config, blocks=s.blocks, iterations=s.iterations,
+                                 field_zernike=layout.tile_field_zernike(fz_lens, k))
+            meta_paths[k] = _write_tile(out / "tiles" / f"meta_{k[0]}_{k[1]}.zarr",
+                                        np.asarray(rec.image))
+            s2d_paths[k] = _write_tile(out / "tiles" / f"sensor2d_{k[0]}_{k[1]}.zarr", cap.sensor2d)
+            steps.update()
+        tiles = {k: open_mosaic_array(p) for k, p in meta_paths.items()}
+        pairs = register_tiles(tiles, layout)
+        pos = solve_positions(pairs, layout)
+        reg_err = max(float(np.hypot(pos[k][0] - true_pos[k][0], pos[k][1] - true_pos[k][1]))
+                      for k in layout.indices)
+        t_blend = time.perf_counter()
+        meta = blend_tiles(meta_paths, pos, layout.shape, out / "mosaic.ome.zarr", chunk=s.chunk,
+                           ramp=s.overlap // 2, pixel_size_um=cfg.pixel_pitch * 1e6,
+                           scheduler=s.scheduler)
+        s2d = blend_tiles(s2d_paths, pos, layout.shape, out / "mosaic_2d.ome.zarr",
+                          chunk=s.chunk, ramp=s.overlap // 2, pixel_size_um=cfg.pixel_pitch * 1e6,
+                          scheduler=s.scheduler)
+        t_blend = time.perf_counter() - t_blend
         steps.update()
-    tiles = {k: open_mosaic_array(p) for k, p in meta_paths.items()}
-    pairs = register_tiles(tiles, layout)
-    pos = solve_positions(pairs, layout)
-    reg_err = max(float(np.hypot(pos[k][0] - true_pos[k][0], pos[k][1] - true_pos[k][1]))
-                  for k in layout.indices)
-    t_blend = time.perf_counter()
-    meta = blend_tiles(meta_paths, pos, layout.shape, out / "mosaic.ome.zarr", chunk=s.chunk,
-                       ramp=s.overlap // 2, pixel_size_um=cfg.pixel_pitch * 1e6,
-                       scheduler=s.scheduler)
-    s2d = blend_tiles(s2d_paths, pos, layout.shape, out / "mosaic_2d.ome.zarr",
-                      chunk=s.chunk, ramp=s.overlap // 2, pixel_size_um=cfg.pixel_pitch * 1e6,
-                      scheduler=s.scheduler)
-    t_blend = time.perf_counter() - t_blend
-    steps.update()
-    steps.close()
-    img_meta, img_2d = open_mosaic(meta)[:], open_mosaic(s2d)[:]
-    truth = (_sample(big, (margin, margin), layout.shape) * np.float32(scale))
-    c = int(np.ceil(s.jitter)) + 2  # the mosaic's own rim, uncovered where tiles moved inwards
-    crop = (slice(c, -c), slice(c, -c))
-    rngd = float(truth.max() - truth.min())
-    ys = [int(round(pos[(i, 0)][0])) - c for i in range(1, s.grid[0])]
-    xs = [int(round(pos[(0, j)][1])) - c for j in range(1, s.grid[1])]
-    rows = []
-    for name, img in (("2D sensor", img_2d), ("meta-imaging", img_meta)):
-        rows.append({"sensor": name, "psnr_db": psnr(truth=truth[crop], image=img[crop],
-                                                data_range=rngd),
-                     "seam_ratio": seam_ratio(img[crop], ys, xs),
-                     "truth_seam_ratio": seam_ratio(truth[crop], ys, xs)})
-    lo, hi = float(truth.min()), float(truth.max())
-    figs = {"mosaic": save_panel(out / "mosaic.png", [
-        ("ground truth", truth), ("2D sensor", np.clip(img_2d, lo, hi)),
-        ("meta-imaging sensor", np.clip(img_meta, lo, hi))], ncols=3,
-        suptitle=f"{s.grid[0]}x{s.grid[1]} mosaic, single plastic lens")}
-    summary = {
-        "scenario": "gigapixel", "table": rows,
-        "registration_error_px": reg_err,
-        "pairs": [{"a": p.a, "b": p.b, "offset": p.offset, "error": p.error} for p in pairs],
-        "positions_true": {f"{k[0]},{k[1]}": v for k, v in true_pos.items()},
-        "positions_found": {f"{k[0]},{k[1]}": v for k, v in pos.items()},
-        "mosaic_shape": layout.shape, "blend_seconds": t_blend,
-        "settings": {"tile": s.tile, "grid": s.grid, "overlap": s.overlap, "jitter": s.jitter,
-                     "blocks": s.blocks, "snr_db": s.snr_db, "seed": s.seed},
-        "seconds": time.perf_counter() - t_start,
-        "figures": {k: Path(v).name for k, v in figs.items()},
-    }
-    return write_report(out, summary, "metasensor scenario: gigapixel mosaic (ED Fig. 7)")
+        img_meta, img_2d = open_mosaic(meta)[:], open_mosaic(s2d)[:]
+        truth = (_sample(big, (margin, margin), layout.shape) * np.float32(scale))
+        c = int(np.ceil(s.jitter)) + 2  # the mosaic's own rim, uncovered where tiles moved inwards
+        crop = (slice(c, -c), slice(c, -c))
+        rngd = float(truth.max() - truth.min())
+        ys = [int(round(pos[(i, 0)][0])) - c for i in range(1, s.grid[0])]
+        xs = [int(round(pos[(0, j)][1])) - c for j in range(1, s.grid[1])]
+        rows = []
+        for name, img in (("2D sensor", img_2d), ("meta-imaging", img_meta)):
+            rows.append({"sensor": name, "psnr_db": psnr(truth=truth[crop], image=img[crop],
+                                                    data_range=rngd),
+                         "seam_ratio": seam_ratio(img[crop], ys, xs),
+                         "truth_seam_ratio": seam_ratio(truth[crop], ys, xs)})
+        lo, hi = float(truth.min()), float(truth.max())
+        figs = {"mosaic": save_panel(out / "mosaic.png", [
+            ("ground truth", truth), ("2D sensor", np.clip(img_2d, lo, hi)),
+            ("meta-imaging sensor", np.clip(img_meta, lo, hi))], ncols=3,
+            suptitle=f"{s.grid[0]}x{s.grid[1]} mosaic, single plastic lens")}
+        summary = {
+            "scenario": "gigapixel", "table": rows,
+            "registration_error_px": reg_err,
+            "pairs": [{"a": p.a, "b": p.b, "offset": p.offset, "error": p.error} for p in pairs],
+            "positions_true": {f"{k[0]},{k[1]}": v for k, v in true_pos.items()},
+            "positions_found": {f"{k[0]},{k[1]}": v for k, v in pos.items()},
+            "mosaic_shape": layout.shape, "blend_seconds": t_blend,
+            "settings": {"tile": s.tile, "grid": s.grid, "overlap": s.overlap, "jitter": s.jitter,
+                         "blocks": s.blocks, "snr_db": s.snr_db, "seed": s.seed},
+            "seconds": time.perf_counter() - t_start,
+            "figures": {k: Path(v).name for k, v in figs.items()},
+        }
+        return write_report(out, summary, "metasensor scenario: gigapixel mosaic (ED Fig. 7)")
 
 
 def open_mosaic_array(path: str) -> np.ndarray:

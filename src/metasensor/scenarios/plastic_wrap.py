@@ -113,54 +113,53 @@ def run_plastic_wrap(out: str | Path, settings: PlasticWrapSettings | None = Non
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
-    steps = tqdm(total=4, desc="plastic-wrap", disable=not progress)
-    cfg = ms.SystemConfig()
-    scene, depth, box = near_object_scene(s.size, s.near_depth)
-    fz = s.wrap.field_zernike()
-    cap = ms.simulate(scene, cfg, field_zernike=fz, depth=depth, snr_db=s.snr_db, seed=s.seed,
-                      field_blocks=s.blocks)
-    lf = ms.simulate(scene, cfg.replace(scan=1), field_zernike=fz, depth=depth,
-                     snr_db=s.snr_db, seed=s.seed + 1, comparison=False, field_blocks=s.blocks)
-    steps.update()
-    views = ms.realign(cap.frames, cap.config, cap.scan_order)
-    rec = ms.reconstruct(views, cap.config, method="wave", blocks=s.blocks,
-                         iterations=s.iterations)
-    steps.update()
-    rec_lf = ms.reconstruct(lf.views, lf.config, blocks=s.blocks, solver="rl")
-    steps.update()
-    o = cap.offset
-    shift = (box[0] - o, box[1] - o, box[2] - o, box[3] - o)
-    images = {"2D sensor": cap.sensor2d, "plain light field": rec_lf.image,
-              "meta-imaging + DAO": np.asarray(rec.image)}
-    truths = {"2D sensor": cap.truth, "plain light field": lf.truth,
-              "meta-imaging + DAO": cap.truth}
-    rows, maps = _measure(images, truths, s.grid, shift)
-    gains = _gains(rows, maps)
-    lo, hi = float(cap.truth.min()), float(cap.truth.max())
-    panel = [("ground truth", cap.truth)] + [(k, np.clip(v, lo, hi)) for k, v in images.items()]
-    figs = {"full field": save_panel(out / "full_field.png", panel, ncols=4,
-                                     suptitle="Diffraction-limited lens behind plastic wrap")}
-    y0, y1, x0, x1 = (max(v, 0) for v in shift)
-    figs["near object"] = save_panel(out / "near_object.png",
-                                     [(t, a[y0:y1, x0:x1]) for t, a in panel], ncols=4,
-                                     suptitle="the nearer object (defocused in the 2D sensor)")
-    figs["resolution maps"] = save_maps(out / "resolution_maps.png", maps,
-                                        "resolved frequency over the field", "cycles / pixel")
-    true_z = np.asarray(cap.zernike)
-    summary = {
-        "scenario": "plastic-wrap", "table": rows, "gains": gains,
-        "maps_cpp": maps, "wrap": {"layers": s.wrap.layers, "rms_waves": s.wrap.rms_waves,
-                                   "correlation_pupil_diameters": s.wrap.correlation,
-                                   "spread_pupil_diameters": s.wrap.spread,
-                                   "seed": s.wrap.seed},
-        "true_rms_waves_per_block": np.sqrt((true_z[..., 3:] ** 2).sum(-1)),
-        "estimated_defocus_waves_per_block": np.asarray(rec.zernike)[..., 3],
-        "settings": {"size": s.size, "blocks": s.blocks, "snr_db": s.snr_db,
-                     "near_depth_m": s.near_depth, "seed": s.seed},
-        "seconds": time.perf_counter() - t0,
-        "figures": {k: Path(v).name for k, v in figs.items()},
-    }
-    summary = write_report(out, summary, "metasensor scenario: plastic wrap (Fig. 3)")
-    steps.update()
-    steps.close()
-    return summary
+    with tqdm(total=4, desc="plastic-wrap", disable=not progress) as steps:
+        cfg = ms.SystemConfig()
+        scene, depth, box = near_object_scene(s.size, s.near_depth)
+        fz = s.wrap.field_zernike()
+        cap = ms.simulate(scene, cfg, field_zernike=fz, depth=depth, snr_db=s.snr_db, seed=s.seed,
+                          field_blocks=s.blocks)
+        lf = ms.simulate(scene, cfg.replace(scan=1), field_zernike=fz, depth=depth,
+                         snr_db=s.snr_db, seed=s.seed + 1, comparison=False, field_blocks=s.blocks)
+        steps.update()
+        views = ms.realign(cap.frames, cap.config, cap.scan_order)
+        rec = ms.reconstruct(views, cap.config, method="wave", blocks=s.blocks,
+                             iterations=s.iterations)
+        steps.update()
+        rec_lf = ms.reconstruct(lf.views, lf.config, blocks=s.blocks, solver="rl")
+        steps.update()
+        o = cap.offset
+        shift = (box[0] - o, box[1] - o, box[2] - o, box[3] - o)
+        images = {"2D sensor": cap.sensor2d, "plain light field": rec_lf.image,
+                  "meta-imaging + DAO": np.asarray(rec.image)}
+        truths = {"2D sensor": cap.truth, "plain light field": lf.truth,
+                  "meta-imaging + DAO": cap.truth}
+        rows, maps = _measure(images, truths, s.grid, shift)
+        gains = _gains(rows, maps)
+        lo, hi = float(cap.truth.min()), float(cap.truth.max())
+        panel = [("ground truth", cap.truth)] + [(k, np.clip(v, lo, hi)) for k, v in images.items()]
+        figs = {"full field": save_panel(out / "full_field.png", panel, ncols=4,
+                                         suptitle="Diffraction-limited lens behind plastic wrap")}
+        y0, y1, x0, x1 = (max(v, 0) for v in shift)
+        figs["near object"] = save_panel(out / "near_object.png",
+                                         [(t, a[y0:y1, x0:x1]) for t, a in panel], ncols=4,
+                                         suptitle="the nearer object (defocused in the 2D sensor)")
+        figs["resolution maps"] = save_maps(out / "resolution_maps.png", maps,
+                                            "resolved frequency over the field", "cycles / pixel")
+        true_z = np.asarray(cap.zernike)
+        summary = {
+            "scenario": "plastic-wrap", "table": rows, "gains": gains,
+            "maps_cpp": maps, "wrap": {"layers": s.wrap.layers, "rms_waves": s.wrap.rms_waves,
+                                       "correlation_pupil_diameters": s.wrap.correlation,
+                                       "spread_pupil_diameters": s.wrap.spread,
+                                       "seed": s.wrap.seed},
+            "true_rms_waves_per_block": np.sqrt((true_z[..., 3:] ** 2).sum(-1)),
+            "estimated_defocus_waves_per_block": np.asarray(rec.zernike)[..., 3],
+            "settings": {"size": s.size, "blocks": s.blocks, "snr_db": s.snr_db,
+                         "near_depth_m": s.near_depth, "seed": s.seed},
+            "seconds": time.perf_counter() - t0,
+            "figures": {k: Path(v).name for k, v in figs.items()},
+        }
+        summary = write_report(out, summary, "metasensor scenario: plastic wrap (Fig. 3)")
+        steps.update()
+        return summary

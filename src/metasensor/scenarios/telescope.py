@@ -115,77 +115,77 @@ def run_telescope(out: str | Path, settings: TelescopeSettings | None = None,
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     t_start = time.perf_counter()
-    steps = tqdm(total=5, desc="telescope", disable=not progress)
-    cfg = ms.SystemConfig(obstruction=s.obstruction)
-    n = cfg.scan**2
-    scene = natural_image("moon", s.size).astype(np.float32)
-    turb = LayeredTurbulence(d_over_r0=s.d_over_r0, samples=64, seed=s.seed, span=n * s.periods)
-    caps = []
-    for k in range(s.periods):
-        tk = turb.at(k * n)
-        caps.append(ms.simulate(scene, cfg, turbulence=tk, field_zernike=tk.field_zernike(n),
-                                field_blocks=s.blocks, snr_db=s.snr_db, seed=s.seed + k,
-                                comparison=k == 0, scale=caps[0].scale if caps else None))
-    static = ms.simulate(scene, cfg, snr_db=s.snr_db, seed=s.seed + 99, comparison=False,
-                         scale=caps[0].scale)
-    steps.update()
-    cap = caps[0]
-    views = ms.realign(cap.frames, cfg, cap.scan_order)
-    corrected = correct_motion_views(views, cap.scan_order, reference=n // 2, mode="turbulence",
-                                     progress=False)
-    est = estimate_annulus(corrected, cfg)
-    cfg_est = cfg.replace(obstruction=round(est.obstruction, 3))
-    steps.update()
-    no_dao = ms.reconstruct(corrected, cfg_est, blocks=s.blocks, iterations=s.iterations)
-    dao = ms.reconstruct(corrected, cfg_est, method="wave", blocks=s.blocks,
-                         iterations=s.iterations)
-    steps.update()
-    frames = np.concatenate([c.frames for c in caps])
-    kymo = _kymograph(frames, cfg, cap.scan_order, s.stride, correct=True)
-    kymo_raw = _kymograph(frames, cfg, cap.scan_order, s.stride, correct=False)
-    kymo_static = _kymograph(np.concatenate([static.frames] * s.periods), cfg,
-                             cap.scan_order, s.stride, correct=False)
-    steps.update()
+    with tqdm(total=5, desc="telescope", disable=not progress) as steps:
+        cfg = ms.SystemConfig(obstruction=s.obstruction)
+        n = cfg.scan**2
+        scene = natural_image("moon", s.size).astype(np.float32)
+        turb = LayeredTurbulence(d_over_r0=s.d_over_r0, samples=64, seed=s.seed, span=n * s.periods)
+        caps = []
+        for k in range(s.periods):
+            tk = turb.at(k * n)
+            caps.append(ms.simulate(scene, cfg, turbulence=tk, field_zernike=tk.field_zernike(n),
+                                    field_blocks=s.blocks, snr_db=s.snr_db, seed=s.seed + k,
+                                    comparison=k == 0, scale=caps[0].scale if caps else None))
+        static = ms.simulate(scene, cfg, snr_db=s.snr_db, seed=s.seed + 99, comparison=False,
+                             scale=caps[0].scale)
+        steps.update()
+        cap = caps[0]
+        views = ms.realign(cap.frames, cfg, cap.scan_order)
+        corrected = correct_motion_views(views, cap.scan_order, reference=n // 2, mode="turbulence",
+                                         progress=False)
+        est = estimate_annulus(corrected, cfg)
+        cfg_est = cfg.replace(obstruction=round(est.obstruction, 3))
+        steps.update()
+        no_dao = ms.reconstruct(corrected, cfg_est, blocks=s.blocks, iterations=s.iterations)
+        dao = ms.reconstruct(corrected, cfg_est, method="wave", blocks=s.blocks,
+                             iterations=s.iterations)
+        steps.update()
+        frames = np.concatenate([c.frames for c in caps])
+        kymo = _kymograph(frames, cfg, cap.scan_order, s.stride, correct=True)
+        kymo_raw = _kymograph(frames, cfg, cap.scan_order, s.stride, correct=False)
+        kymo_static = _kymograph(np.concatenate([static.frames] * s.periods), cfg,
+                                 cap.scan_order, s.stride, correct=False)
+        steps.update()
 
-    truth = cap.truth
-    rng = float(truth.max() - truth.min())
-    images = {"2D sensor": cap.sensor2d, "meta-imaging, no DAO": np.asarray(no_dao.image),
-              "meta-imaging + DAO": np.asarray(dao.image)}
-    rows = [{"sensor": k, "psnr_db": psnr(truth=truth, image=v, data_range=rng)}
-            for k, v in images.items()]
-    resid = _residuals(dao, turb, n, s.blocks)
-    lat_static = _lattice(kymo_static, cfg.scan)
-    kymo_stats = {"lattice_corrected_over_static": _lattice(kymo, cfg.scan) / lat_static,
-                  "lattice_uncorrected_over_static": _lattice(kymo_raw, cfg.scan) / lat_static}
-    lo, hi = float(truth.min()), float(truth.max())
-    panel = [("ground truth", truth)] + [(k, np.clip(v, lo, hi)) for k, v in images.items()]
-    figs = {"full field": save_panel(out / "full_field.png", panel, ncols=4,
-                                     suptitle=f"Moon through turbulence, D/r0 = {s.d_over_r0}")}
-    figs["kymographs"] = save_panel(out / "kymographs.png", [
-        ("static reference", kymo_static), ("no motion correction", kymo_raw),
-        ("motion-corrected", kymo)], ncols=3, suptitle="kymographs (time down, position across)")
-    figs["pupil"] = save_panel(out / "pupil.png", [("angular intensity", est.intensity),
-                                                   ("binary pupil", est.amplitude)], ncols=2,
-                               suptitle=f"estimated obstruction {est.obstruction:.3f} "
-                                        f"(true {s.obstruction})")
-    summary = {
-        "scenario": "telescope", "table": rows,
-        "dao_gain_db": rows[2]["psnr_db"] - rows[1]["psnr_db"],
-        "dao_over_2d_db": rows[2]["psnr_db"] - rows[0]["psnr_db"],
-        "pupil": {"true_obstruction": s.obstruction, "estimated_obstruction": est.obstruction,
-                  "error": abs(est.obstruction - s.obstruction), "blur_views": est.blur},
-        "wavefront_residual_rms_waves": resid, "residual_max_waves": float(resid.max()),
-        "true_rms_waves_mean": float(np.mean([np.sqrt((turb.mean_zernike(n)[3:] ** 2).sum())])),
-        "kymograph": kymo_stats,
-        "turbulence": {"d_over_r0": s.d_over_r0, "layers": [
-            {"weight": x.weight, "wind_d_per_frame": x.wind, "spread_d": x.spread}
-            for x in turb.layers], "outer_scale": turb.outer_scale, "seed": s.seed},
-        "settings": {"size": s.size, "blocks": s.blocks, "periods": s.periods,
-                     "stride": s.stride, "snr_db": s.snr_db},
-        "seconds": time.perf_counter() - t_start,
-        "figures": {k: Path(v).name for k, v in figs.items()},
-    }
-    summary = write_report(out, summary, "metasensor scenario: telescope (Fig. 5)")
-    steps.update()
-    steps.close()
-    return summary
+        truth = cap.truth
+        rng = float(truth.max() - truth.min())
+        images = {"2D sensor": cap.sensor2d, "meta-imaging, no DAO": np.asarray(no_dao.image),
+                  "meta-imaging + DAO": np.asarray(dao.image)}
+        rows = [{"sensor": k, "psnr_db": psnr(truth=truth, image=v, data_range=rng)}
+                for k, v in images.items()]
+        resid = _residuals(dao, turb, n, s.blocks)
+        lat_static = _lattice(kymo_static, cfg.scan)
+        kymo_stats = {"lattice_corrected_over_static": _lattice(kymo, cfg.scan) / lat_static,
+                      "lattice_uncorrected_over_static": _lattice(kymo_raw, cfg.scan) / lat_static}
+        lo, hi = float(truth.min()), float(truth.max())
+        panel = [("ground truth", truth)] + [(k, np.clip(v, lo, hi)) for k, v in images.items()]
+        figs = {"full field": save_panel(out / "full_field.png", panel, ncols=4,
+                                         suptitle=f"Moon through turbulence, D/r0 = {s.d_over_r0}")}
+        figs["kymographs"] = save_panel(out / "kymographs.png", [
+            ("static reference", kymo_static), ("no motion correction", kymo_raw),
+            ("motion-corrected", kymo)], ncols=3,
+            suptitle="kymographs (time down, position across)")
+        figs["pupil"] = save_panel(out / "pupil.png", [("angular intensity", est.intensity),
+                                                       ("binary pupil", est.amplitude)], ncols=2,
+                                   suptitle=f"estimated obstruction {est.obstruction:.3f} "
+                                            f"(true {s.obstruction})")
+        summary = {
+            "scenario": "telescope", "table": rows,
+            "dao_gain_db": rows[2]["psnr_db"] - rows[1]["psnr_db"],
+            "dao_over_2d_db": rows[2]["psnr_db"] - rows[0]["psnr_db"],
+            "pupil": {"true_obstruction": s.obstruction, "estimated_obstruction": est.obstruction,
+                      "error": abs(est.obstruction - s.obstruction), "blur_views": est.blur},
+            "wavefront_residual_rms_waves": resid, "residual_max_waves": float(resid.max()),
+            "true_rms_waves_mean": float(np.mean([np.sqrt((turb.mean_zernike(n)[3:] ** 2).sum())])),
+            "kymograph": kymo_stats,
+            "turbulence": {"d_over_r0": s.d_over_r0, "layers": [
+                {"weight": x.weight, "wind_d_per_frame": x.wind, "spread_d": x.spread}
+                for x in turb.layers], "outer_scale": turb.outer_scale, "seed": s.seed},
+            "settings": {"size": s.size, "blocks": s.blocks, "periods": s.periods,
+                         "stride": s.stride, "snr_db": s.snr_db},
+            "seconds": time.perf_counter() - t_start,
+            "figures": {k: Path(v).name for k, v in figs.items()},
+        }
+        summary = write_report(out, summary, "metasensor scenario: telescope (Fig. 5)")
+        steps.update()
+        return summary

@@ -138,6 +138,8 @@ def realign_cmd(
 
     Example: metasensor realign raw.tif --calib calib.toml --scan 5 --out views.tif
     """
+    from contextlib import ExitStack
+
     from tqdm import tqdm
 
     from metasensor.io.raw import open_raw
@@ -156,7 +158,7 @@ def realign_cmd(
     guard([raw_path, config, calib_path], [out], lock=False)
     cfg, phases, moving = _stored_settings(raw_path, config, scan, order, moving)
     tp = len(phases)
-    with open_raw(raw_path) as raw:
+    with open_raw(raw_path) as raw, ExitStack() as bars:  # the bar closes on any error
         calib = _read_calib(calib_path, cfg, raw.shape[1:])
         n_frames = len(raw)
         if n_frames < tp:
@@ -172,7 +174,7 @@ def realign_cmd(
               lock=[out])  # one lock for the family of numbered stacks
         if calib is None:
             _check_period(raw, cfg, config, raw_path)
-        stream = tqdm(raw, total=n_frames, desc="realign", unit="frame")
+        stream = bars.enter_context(tqdm(raw, total=n_frames, desc="realign", unit="frame"))
         if calib is not None:
             from metasensor.sensor.calibrate import adapt
 
