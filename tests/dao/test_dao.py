@@ -6,7 +6,7 @@ import torch
 
 import metasensor as ms
 from metasensor.config import SystemConfig
-from metasensor.dao.banks import block_psfs, geometric_psfs
+from metasensor.dao.banks import block_psfs, geometric_psfs, psf_bank
 from metasensor.dao.block import DaoBlock
 from metasensor.dao.estimate import DaoResult, estimate_block_aberration, run_dao
 from metasensor.dao.wavefront import zernike_rms
@@ -315,3 +315,31 @@ def test_dao_estimator_is_checked():
         run_dao(np.ones((15, 15, 16, 16), np.float32), CFG, estimator="mean")
     with pytest.raises(ValueError, match="isa_below"):
         run_dao(np.ones((15, 15, 16, 16), np.float32), CFG, isa_below=float("nan"))
+
+
+def test_wave_and_geometric_results_share_one_contract():
+    # shifts: the view shifts of the result's bank against the aberration-free bank (geometric:
+    # what the ideal PSFs are translated by; wave: the estimated wavefront's gradient);
+    # residual_shifts: what the last update measured. Both zero outside the used views.
+    from metasensor.dao.estimate import gradient_shifts
+    from metasensor.dao.wavefront import gradient_matrix
+
+    cfg = SystemConfig(nnum=9, mla_pitch=41.4e-6, mla_focal=414e-6, scan=3)
+    z = np.zeros(45)
+    z[3], z[5] = 0.3, 0.2
+    bank = ms.view_psfs(cfg, z)
+    views, _ = synth_views(cfg, _scene(96 + bank.shape[-1]), bank, snr_db=40)
+    used = cfg.view_mask()
+    matrix = gradient_matrix(cfg, jmax=45)
+    for method in ("wave", "geometric"):
+        res = run_dao(views, cfg, method=method, max_iter=1)
+        for s in (res.shifts, res.residual_shifts):
+            assert s.shape == (9, 9, 2) and not s[~used].any()
+        assert np.abs(res.residual_shifts[used]).max() > 0.1  # the first update corrected them
+        modelled = gradient_shifts(res.zernike, matrix)[used]
+        if method == "wave":
+            np.testing.assert_array_equal(res.shifts[used], modelled)
+        else:
+            assert np.abs(res.shifts[used] - modelled).max() < 0.25
+            ideal = psf_bank(cfg, None, None, None, res.psf_size)
+            np.testing.assert_array_equal(block_psfs(cfg, res), geometric_psfs(ideal, res.shifts))

@@ -33,6 +33,7 @@ import numpy as np
 import torch
 
 from metasensor.align.shifts import fourier_shift, measure_shifts_torch
+from metasensor.backend import resolve_device
 from metasensor.phasespace.operator import PhaseSpaceOperator, make_geometry
 from metasensor.solvers.richardson_lucy import RLOptions, richardson_lucy
 
@@ -192,8 +193,9 @@ def register_views(psf, data_win, d: int, options: RegistrationOptions | None = 
     from dataclasses import replace
 
     opts = replace(options or RegistrationOptions(), **settings)
-    psf0 = torch.as_tensor(psf, dtype=torch.float32, device="cpu")  # moved where used
-    y_win = torch.as_tensor(data_win, dtype=torch.float32, device="cpu")
+    dev = resolve_device(device)  # the bank and the data go to the device once
+    psf0 = torch.as_tensor(psf, dtype=torch.float32, device=dev)
+    y_win = torch.as_tensor(data_win, dtype=torch.float32, device=dev)
     if psf0.ndim != 3 or y_win.ndim != 3 or psf0.shape[0] != y_win.shape[0]:
         raise ValueError(f"psf (V, K, K) and data_win (V, Sy, Sx) must agree in V, got "
                          f"{tuple(psf0.shape)} and {tuple(y_win.shape)}")
@@ -226,7 +228,7 @@ def register_views(psf, data_win, d: int, options: RegistrationOptions | None = 
             explained.append(frac)
             if frac < MIN_EXPLAINED:
                 break
-        candidate = translate_psfs(psf0.to(pred.device), total + step)
+        candidate = translate_psfs(psf0, total + step)
         fitted = _fit(candidate, y_win, d, opts, device)
         misfits.append(fitted[-1])
         if not fitted[-1] < misfit:  # the shifts do not explain the data better: keep the bank

@@ -141,8 +141,13 @@ class DaoResult:
     history : list of float
         r.m.s. (waves) of every update.
     shifts : numpy.ndarray
-        ``(nnum, nnum, 2)`` pixels: geometric, the accumulated absolute view shifts the PSFs
-        were translated by; wave, the last residual shifts.
+        ``(nnum, nnum, 2)`` pixels (y, x): the view shifts of the result's PSF bank against the
+        aberration-free bank, for either method (geometric: the accumulated shifts the ideal
+        PSFs are translated by; wave: the shifts the estimated wavefront's gradient predicts,
+        :func:`gradient_shifts`); 0 for unused views.
+    residual_shifts : numpy.ndarray
+        ``(nnum, nnum, 2)`` pixels: the shifts the last update measured against the bank then
+        in use (the misfit it corrected); 0 for unused views.
     method : str
     image : numpy.ndarray or None
         The last intermediate estimate I (pixel grid, the views' scale).
@@ -158,6 +163,7 @@ class DaoResult:
     history: list[float]
     shifts: np.ndarray
     method: str
+    residual_shifts: np.ndarray | None = None
     image: np.ndarray | None = None
     fits: list[float] = field(default_factory=list)
     psf_size: int | None = None
@@ -337,11 +343,12 @@ def run_dao(block_views, cfg: SystemConfig, options: DaoOptions | None = None, *
             bar.update(1)
             if run.history[-1] < opts.tol:
                 break
-    shifts = run.total if opts.method == "geometric" else run.shifts
+    shifts = run.total if opts.method == "geometric" else np.where(
+        used[..., None], gradient_shifts(run.phi, matrix), 0.0)
     image = None if run.image is None else to_numpy(run.image) * run.blk.scale
     return DaoResult(zernike=run.phi, history=run.history, shifts=shifts, method=opts.method,
-                     image=image, fits=run.fits, psf_size=run.size(run.phi),
-                     estimates=run.estimates)
+                     residual_shifts=run.shifts, image=image, fits=run.fits,
+                     psf_size=run.size(run.phi), estimates=run.estimates)
 
 
 def estimate_block_aberration(block_views, cfg: SystemConfig, method: str = "wave", init=None,

@@ -26,7 +26,7 @@ from pathlib import Path
 from metasensor.io import interrupt
 
 __all__ = ["atomic_path", "atomic_write_text", "atomic_write_bytes", "refuse_overwrite",
-           "result_folder", "StagedFolder", "replace_tree", "sibling_name", "remove_stale",
+           "StagedFolder", "replace_tree", "sibling_name", "remove_stale",
            "is_own_zarr", "discard_tree", "staged_zarr", "write_error"]
 
 _NAME_MAX = 255
@@ -386,16 +386,3 @@ def _on_exit(callback) -> None:
         ctx.call_on_close(callback)
     else:
         atexit.register(callback)
-
-
-@contextlib.contextmanager
-def result_folder(out: str | Path, names: Iterable[str]) -> Iterator[Path]:
-    """:class:`StagedFolder` as a context: yields the temporary folder, commits on success,
-    removes it on error."""
-    staged = StagedFolder(out, names)
-    try:
-        yield staged.path
-        staged.commit()
-    except BaseException:
-        staged.discard()
-        raise

@@ -119,7 +119,7 @@ def run_plastic_wrap(out: str | Path, settings: PlasticWrapSettings | None = Non
         fz = s.wrap.field_zernike()
         cap = ms.simulate(scene, cfg, field_zernike=fz, depth=depth, snr_db=s.snr_db, seed=s.seed,
                           field_blocks=s.blocks)
-        lf = ms.simulate(scene, cfg.replace(scan=1), field_zernike=fz, depth=depth,
+        lf = ms.simulate(scene, cfg, scan=1, field_zernike=fz, depth=depth,
                          snr_db=s.snr_db, seed=s.seed + 1, comparison=False, field_blocks=s.blocks)
         steps.update()
         views = ms.realign(cap.frames, cap.config, cap.scan_order)

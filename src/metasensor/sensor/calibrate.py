@@ -35,7 +35,7 @@ from scipy import ndimage
 from metasensor.sensor.calibration import Calibration
 from metasensor.sensor.checks import lattice_residual
 
-__all__ = ["find_grid", "measure_offsets", "calibrate", "flat_field", "lattice_phase"]
+__all__ = ["find_grid", "measure_offsets", "calibrate", "flat_field"]
 
 _MAX_SIDE = 4096  # the grid fit uses at most this central crop per axis (plenty of lenslets)
 
@@ -154,14 +154,6 @@ def _refine(dfts: list[_Dft], g0: np.ndarray, bins: np.ndarray, iters: int = 12)
         if size < 1e-6:
             break
     return g
-
-
-def lattice_phase(frame: np.ndarray, g: np.ndarray) -> tuple[np.ndarray, float]:
-    """Phases (rad) and mean relative amplitude of the lattice components ``g`` (2 x 2, rows
-    g1, g2 in cycles/px) of ``frame``, with coordinates relative to the frame's centre."""
-    dft = _Dft(_as_image(frame))
-    vals = np.array([dft(gk) for gk in g])
-    return np.angle(vals), float(np.abs(vals).mean() / max(dft.norm, 1e-300))
 
 
 def find_grid(frame, nnum: int, pitch_range: tuple[float, float] | None = None,
