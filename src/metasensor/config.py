@@ -69,6 +69,17 @@ class ConfigError(ValueError):
     """An impossible or inconsistent system parameter (one line, naming the parameter)."""
 
 
+def _parse(loads, error: type[Exception], text: str, what: str) -> Any:
+    """``loads(text)``, its syntax errors (and text nested thousands deep) as one ConfigError
+    line ``invalid <what>: ...``."""
+    try:
+        return loads(text)
+    except error as exc:
+        raise ConfigError(f"invalid {what}: {exc}") from None
+    except RecursionError:
+        raise ConfigError(f"invalid {what}: nested too deeply") from None
+
+
 def toml_value(value: Any) -> str:
     """One TOML value (bool, int, float with exact repr, str, list): scalars written by
     ``tomli_w``, arrays kept on one line (tomli_w puts every item on its own line);
@@ -353,12 +364,7 @@ class SystemConfig:
     def from_json(cls, text: str) -> SystemConfig:
         """Configuration from JSON: a config's own ``to_json`` or a view stack's description,
         whose extras under the ``"metasensor"`` key (io.views) are not system parameters."""
-        try:
-            data = json.loads(text)
-        except json.JSONDecodeError as exc:
-            raise ConfigError(f"invalid JSON configuration: {exc}") from None
-        except RecursionError:  # nested thousands deep: no configuration
-            raise ConfigError("invalid JSON configuration: nested too deeply") from None
+        data = _parse(json.loads, json.JSONDecodeError, text, "JSON configuration")
         if not isinstance(data, dict):
             raise ConfigError(f"JSON configuration must be an object, got {type(data).__name__}")
         return cls.from_dict(data)
@@ -373,12 +379,7 @@ class SystemConfig:
 
     @classmethod
     def from_toml_string(cls, text: str) -> SystemConfig:
-        try:
-            data = tomllib.loads(text)
-        except tomllib.TOMLDecodeError as exc:
-            raise ConfigError(f"invalid TOML: {exc}") from None
-        except RecursionError:  # nested thousands deep: no configuration
-            raise ConfigError("invalid TOML: nested too deeply") from None
+        data = _parse(tomllib.loads, tomllib.TOMLDecodeError, text, "TOML")
         table = data.get("system", data)
         if not isinstance(table, dict):
             raise ConfigError(f"'system' must be a TOML table, got {table!r:.40}")

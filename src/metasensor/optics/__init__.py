@@ -5,23 +5,8 @@ Public: :func:`view_psfs`, :func:`widefield_psf` (``optics.psf``), the Zernike t
 :func:`load_psf` / :func:`save_psf` (HDF5 banks written by ``metasensor psf``).
 """
 
+from metasensor.optics import zernike as _zernike
 from metasensor.optics.psf import view_psfs, widefield_psf
-from metasensor.optics.zernike import (
-    fit_zernike,
-    noll_to_nm,
-    random_zernike,
-    wavefront,
-    zernike_basis,
-    zernike_gradients,
-)
+from metasensor.optics.zernike import *  # noqa: F403 - the Zernike tools, zernike.__all__
 
-__all__ = [
-    "view_psfs",
-    "widefield_psf",
-    "noll_to_nm",
-    "zernike_basis",
-    "zernike_gradients",
-    "wavefront",
-    "fit_zernike",
-    "random_zernike",
-]
+__all__ = ["view_psfs", "widefield_psf", *_zernike.__all__]

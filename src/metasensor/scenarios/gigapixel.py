@@ -83,8 +83,6 @@ def _write_tile(path: Path, image: np.ndarray) -> str:
 def run_gigapixel(out: str | Path, settings: GigapixelSettings | None = None,
                   progress: bool = True) -> dict:
     """Run the scenario and write its report into ``out``; returns the summary."""
-    from tqdm.auto import tqdm
-
     import metasensor as ms
     from metasensor.io.figures import save_panel
     from metasensor.metrics import psnr
@@ -96,26 +94,25 @@ def run_gigapixel(out: str | Path, settings: GigapixelSettings | None = None,
         solve_positions,
     )
     from metasensor.mosaic.seams import seam_ratio
-    from metasensor.scenarios.report import write_report
+    from metasensor.scenarios.report import scenario_run
     from metasensor.sensor.realign import lenslet_counts
     from metasensor.simulation.lens import SingleLens
 
     s = settings or GigapixelSettings()
-    out = Path(out)
-    (out / "tiles").mkdir(parents=True, exist_ok=True)
-    t_start = time.perf_counter()
     lens = SingleLens()
     cfg = lens.config(ms.SystemConfig())
     ly, lx = lenslet_counts((s.tile, s.tile), cfg)
     o = cfg.field_offset_px
     layout = MosaicLayout((ly * cfg.nnum, lx * cfg.nnum), s.grid, s.overlap)
-    fz_lens = lens.field_zernike(cfg, (s.field_px, s.field_px))
-    margin = o + int(np.ceil(s.jitter)) + 4
-    big = _scene(s.scene, (layout.shape[0] + 2 * margin + s.tile, layout.shape[1] + 2 * margin
-                           + s.tile))
-    rng = np.random.default_rng(s.seed)
-    true_pos, meta_paths, s2d_paths, scale = {}, {}, {}, None
-    with tqdm(total=len(layout.indices) + 1, desc="gigapixel", disable=not progress) as steps:
+    with scenario_run(out, "gigapixel", len(layout.indices) + 2, progress) as run:
+        out, steps = run.out, run.steps
+        (out / "tiles").mkdir(exist_ok=True)
+        fz_lens = lens.field_zernike(cfg, (s.field_px, s.field_px))
+        margin = o + int(np.ceil(s.jitter)) + 4
+        big = _scene(s.scene, (layout.shape[0] + 2 * margin + s.tile,
+                               layout.shape[1] + 2 * margin + s.tile))
+        rng = np.random.default_rng(s.seed)
+        true_pos, meta_paths, s2d_paths, scale = {}, {}, {}, None
         for k in layout.indices:
             oy, ox = layout.origin(k)
             err = (0.0, 0.0) if k == (0, 0) else tuple(rng.uniform(-s.jitter, s.jitter, 2))
@@ -177,10 +174,8 @@ def run_gigapixel(out: str | Path, settings: GigapixelSettings | None = None,
             "mosaic_shape": layout.shape, "blend_seconds": t_blend,
             "settings": {"tile": s.tile, "grid": s.grid, "overlap": s.overlap, "jitter": s.jitter,
                          "blocks": s.blocks, "snr_db": s.snr_db, "seed": s.seed},
-            "seconds": time.perf_counter() - t_start,
-            "figures": {k: Path(v).name for k, v in figs.items()},
         }
-        return write_report(out, summary, "metasensor scenario: gigapixel mosaic (ED Fig. 7)")
+        return run.finish(summary, figs, "metasensor scenario: gigapixel mosaic (ED Fig. 7)")
 
 
 def open_mosaic_array(path: str) -> np.ndarray:

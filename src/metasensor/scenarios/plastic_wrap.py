@@ -16,7 +16,6 @@ frequency (:func:`~metasensor.scenarios.measure.resolved_frequency`) on a grid o
 
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -103,17 +102,13 @@ def _gains(rows: list[dict], maps: dict) -> dict:
 def run_plastic_wrap(out: str | Path, settings: PlasticWrapSettings | None = None,
                      progress: bool = True) -> dict:
     """Run the scenario and write its report into ``out``; returns the summary."""
-    from tqdm.auto import tqdm
-
     import metasensor as ms
     from metasensor.io.figures import save_panel
-    from metasensor.scenarios.report import save_maps, write_report
+    from metasensor.scenarios.report import save_maps, scenario_run
 
     s = settings or PlasticWrapSettings()
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    t0 = time.perf_counter()
-    with tqdm(total=4, desc="plastic-wrap", disable=not progress) as steps:
+    with scenario_run(out, "plastic-wrap", 4, progress) as run:
+        out, steps = run.out, run.steps
         cfg = ms.SystemConfig()
         scene, depth, box = near_object_scene(s.size, s.near_depth)
         fz = s.wrap.field_zernike()
@@ -157,9 +152,5 @@ def run_plastic_wrap(out: str | Path, settings: PlasticWrapSettings | None = Non
             "estimated_defocus_waves_per_block": np.asarray(rec.zernike)[..., 3],
             "settings": {"size": s.size, "blocks": s.blocks, "snr_db": s.snr_db,
                          "near_depth_m": s.near_depth, "seed": s.seed},
-            "seconds": time.perf_counter() - t0,
-            "figures": {k: Path(v).name for k, v in figs.items()},
         }
-        summary = write_report(out, summary, "metasensor scenario: plastic wrap (Fig. 3)")
-        steps.update()
-        return summary
+        return run.finish(summary, figs, "metasensor scenario: plastic wrap (Fig. 3)")

@@ -1,15 +1,58 @@
-"""Shared ending of every scenario: figures, ``summary.json`` and ``index.html``, atomically."""
+"""What every scenario shares: its start (output folder, progress bar, clock) and its ending
+(figures, ``summary.json`` and ``index.html``, atomically)."""
 
 from __future__ import annotations
 
+import contextlib
 import json
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from metasensor.io.atomic import atomic_write_text
 
-__all__ = ["write_report", "to_jsonable", "save_maps"]
+__all__ = ["write_report", "to_jsonable", "save_maps", "ScenarioRun", "scenario_run"]
+
+
+@dataclass(frozen=True)
+class ScenarioRun:
+    """A running scenario: its output folder, its progress bar (tqdm) and its start time
+    (``time.perf_counter()``, seconds)."""
+
+    out: Path
+    steps: Any
+    start: float
+
+    def seconds(self) -> float:
+        """Wall time since the start, seconds."""
+        return time.perf_counter() - self.start
+
+    def finish(self, summary: dict, figures: dict, title: str) -> dict:
+        """Add the wall time (``seconds``) and the figures' file names (``figures``) to
+        ``summary``, write the report (:func:`write_report`) and count the last step; returns
+        the summary as written."""
+        summary = {**summary, "seconds": self.seconds(),
+                   "figures": {k: Path(v).name for k, v in figures.items()}}
+        summary = write_report(self.out, summary, title)
+        self.steps.update()
+        return summary
+
+
+@contextlib.contextmanager
+def scenario_run(out: str | Path, desc: str, total: int, progress: bool) -> Iterator[ScenarioRun]:
+    """Start a scenario: create ``out``, start the clock and a progress bar of ``total`` steps
+    named ``desc`` (shown when ``progress``), closed when the scenario ends or fails."""
+    from tqdm.auto import tqdm
+
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    start = time.perf_counter()
+    with tqdm(total=total, desc=desc, disable=not progress) as steps:
+        yield ScenarioRun(out, steps, start)
 
 
 def to_jsonable(value):

@@ -22,7 +22,6 @@ over the window's frames (Noll 4-45; piston, tip and tilt are image motion).
 
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -100,22 +99,18 @@ def _residuals(rec, turb, n: int, blocks) -> np.ndarray:
 def run_telescope(out: str | Path, settings: TelescopeSettings | None = None,
                   progress: bool = True) -> dict:
     """Run the scenario and write its report into ``out``; returns the summary."""
-    from tqdm.auto import tqdm
-
     import metasensor as ms
     from metasensor.io.figures import save_panel
     from metasensor.metrics import psnr
     from metasensor.motion.correct import correct_motion_views
     from metasensor.scenarios.pupil import estimate_annulus
-    from metasensor.scenarios.report import write_report
+    from metasensor.scenarios.report import scenario_run
     from metasensor.scenarios.screens import LayeredTurbulence
     from metasensor.simulation.scenes import natural_image
 
     s = settings or TelescopeSettings()
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    t_start = time.perf_counter()
-    with tqdm(total=5, desc="telescope", disable=not progress) as steps:
+    with scenario_run(out, "telescope", 5, progress) as run:
+        out, steps = run.out, run.steps
         cfg = ms.SystemConfig(obstruction=s.obstruction)
         n = cfg.scan**2
         scene = natural_image("moon", s.size).astype(np.float32)
@@ -183,9 +178,5 @@ def run_telescope(out: str | Path, settings: TelescopeSettings | None = None,
                 for x in turb.layers], "outer_scale": turb.outer_scale, "seed": s.seed},
             "settings": {"size": s.size, "blocks": s.blocks, "periods": s.periods,
                          "stride": s.stride, "snr_db": s.snr_db},
-            "seconds": time.perf_counter() - t_start,
-            "figures": {k: Path(v).name for k, v in figs.items()},
         }
-        summary = write_report(out, summary, "metasensor scenario: telescope (Fig. 5)")
-        steps.update()
-        return summary
+        return run.finish(summary, figs, "metasensor scenario: telescope (Fig. 5)")

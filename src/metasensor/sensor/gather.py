@@ -19,7 +19,10 @@ try:  # numba is optional: present through aotools, but the NumPy path always wo
     import numba
 
     @numba.njit(parallel=True, nogil=True, cache=True)
-    def _gather_numba(frames, out, tidx, offy, offx, n, p, ly, lx):  # pragma: no cover - jit
+    def _copy_numba(frames, views, tidx, offy, offx, p, ly, lx, to_frames):  # pragma: no cover
+        # one view row (u, v, y) per (u, y) and v: its p source rows stay in cache; gather
+        # (views from frames) or, with to_frames, its inverse scatter
+        n = views.shape[0]
         for k in numba.prange(n * ly * p):
             u = k // (ly * p)
             y = k % (ly * p)
@@ -27,26 +30,15 @@ try:  # numba is optional: present through aotools, but the NumPy path always wo
             r = y % p
             for c in range(p):
                 t = tidx[r, c]
-                src = frames[t, offy[t] + i * n + u, offx[t]:]
+                row = frames[t, offy[t] + i * n + u, offx[t]:]
                 for v in range(n):
-                    dst = out[u, v, y]
-                    for j in range(lx):
-                        dst[j * p + c] = src[j * n + v]
-
-    @numba.njit(parallel=True, nogil=True, cache=True)
-    def _scatter_numba(views, frames, tidx, offy, offx, n, p, ly, lx):  # pragma: no cover
-        for k in numba.prange(n * ly * p):
-            u = k // (ly * p)
-            y = k % (ly * p)
-            i = y // p
-            r = y % p
-            for c in range(p):
-                t = tidx[r, c]
-                dst = frames[t, offy[t] + i * n + u, offx[t]:]
-                for v in range(n):
-                    src = views[u, v, y]
-                    for j in range(lx):
-                        dst[j * n + v] = src[j * p + c]
+                    samples = views[u, v, y]
+                    if to_frames:
+                        for j in range(lx):
+                            row[j * n + v] = samples[j * p + c]
+                    else:
+                        for j in range(lx):
+                            samples[j * p + c] = row[j * n + v]
 
     _HAVE_NUMBA = True
 except ImportError:  # pragma: no cover - environment dependent
@@ -101,8 +93,7 @@ def scatter_views(views: np.ndarray, frames: np.ndarray, order: list[tuple[int, 
             block = views[:, :, r::p, c::p].transpose(2, 0, 3, 1).reshape(ly * n, lx * n)
             frames[t, oy:oy + ly * n, ox:ox + lx * n] = block
         return frames
-    _scatter_numba(np.ascontiguousarray(views), frames, *_tables(order, offsets, p), n, p, ly,
-                   lx)
+    _copy_numba(frames, np.ascontiguousarray(views), *_tables(order, offsets, p), p, ly, lx, True)
     return frames
 
 
@@ -115,7 +106,7 @@ def gather_views(frames, out: np.ndarray, order: list[tuple[int, int]],
     if not _use_numba(engine, frames, out):
         _gather_numpy(frames, out, order, offsets, n, p, ly, lx)
         return out
-    _gather_numba(frames, out, *_tables(order, offsets, p), n, p, ly, lx)
+    _copy_numba(frames, out, *_tables(order, offsets, p), p, ly, lx, False)
     return out
 
 
