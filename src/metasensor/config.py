@@ -124,7 +124,7 @@ class SystemConfig:
     moving : what moves during a scan: ``"mla"`` (the meta-imaging sensor: the MLA moves over a
         fixed sensor by ``nnum / scan`` px per step) or ``"image"`` (scanning light-field
         microscopes: the image moves over a fixed MLA and sensor by ``mla_pitch / scan`` per
-        step, any period; interface.md). The default of ``realign``'s ``moving`` argument.
+        step, any period; docs/conventions.md). The default of ``realign``'s ``moving`` argument.
 
     Reconstruction grid: views are sampled every ``mla_pitch / scan`` on the image plane; the
     reconstruction grid subdivides that step into ``d = scan_step_px`` pixels, so its pitch is

@@ -1,7 +1,7 @@
 """Digital adaptive optics in one block: wave-optics (and geometric) wavefront estimation.
 
-Hand-written from the paper (Wu et al. 2022, Methods, "ISA with multisite DAO in wave optics";
-system.md §4). Alternate, starting from φ = ``init`` (or 0):
+Hand-written from the paper (Wu et al. 2022, Methods, "ISA with multisite DAO in wave optics").
+Alternate, starting from φ = ``init`` (or 0):
 
 1. H = PSFs of every view from the pupil A·exp(i2πφ) (:func:`metasensor.dao.banks.psf_bank`;
    "geometric": the aberration-free PSFs translated by the accumulated view shifts, never

@@ -1,9 +1,10 @@
 """System-aberration calibration for depth: per-view shift maps and the warp that removes them.
 
-A calibration is, per view (u, v), a map ``s_uv(p) = (dy, dx)`` in VIEW pixels: the shift that
-the system aberration adds to the view's parallax (its disparity at field point p, from the
-global aberration calibration, system.md §2 step 4). The aberrated view content at ``p + s_uv(p)``
-is the unaberrated content at ``p``, so the corrected view is ``V'_uv(p) = V_uv(p + s_uv(p))``.
+A calibration is, per view (u, v), a map ``s_uv(p) = (dy, dx)`` in VIEW pixels: the shift that the
+system aberration adds to the view's parallax (its disparity at field point p, from the global
+aberration calibration, :mod:`metasensor.dao.system_aberration`). The aberrated view content
+at ``p + s_uv(p)`` is the unaberrated content at ``p``, so the corrected view is
+``V'_uv(p) = V_uv(p + s_uv(p))``.
 
 Accepted forms: an array ``(nnum, nnum, 2, H, W)`` (or ``(nnum, nnum, 2)`` for field-constant
 shifts); an object with ``.shift_maps(shape) -> (nnum, nnum, 2, H, W)`` (the DAO stage's

@@ -1,6 +1,6 @@
 """Dense disparity, confidence and metric depth from a view stack (multi-view stereo).
 
-Pipeline (system.md §2 step 7, the paper's Fig. 6):
+Pipeline (the paper's Fig. 6 and Methods, "Depth estimation"):
 
 1. Views inside the pupil (``cfg.view_mask()``), each divided by its mean (vignetting and the
    coded aperture dim the outer views); optionally warped by the system aberration's per-view
@@ -18,9 +18,8 @@ Pipeline (system.md §2 step 7, the paper's Fig. 6):
 Written here by hand (no maintained Python library does plane-sweep stereo over a light-field
 view grid); the pieces follow the light-field literature as cited in each module. Memory: the
 used views twice (input copy, padded copy), the cost volume ``(candidates, H, W)`` float32 and a
-few ``(9, H, W)`` accumulators (about 2 GB for 113 views of 1,000 x 1,000, 64 candidates).
-Speed (benchmarks/bench_depth.py): 1,000 x 1,000 views, 113 views, 64 candidates, refinement
-included: about 48 s of CPU time (25 s on 2 cores).
+few ``(9, H, W)`` accumulators (``(candidates + 2·V + 9) · H · W · 4`` bytes for V views).
+Speed: ``benchmarks/bench_depth.py`` (figures in ``docs/decisions.md``).
 """
 
 from __future__ import annotations
@@ -67,7 +66,7 @@ class DepthResult:
         focused in front of the MLA, towards the main lens; d = nnum // scan).
     object_distance : float32 metres from the main lens (thin lens), or ``None`` without
         ``focal_length`` and ``focus_distance``; NaN where no real object maps there.
-    depth : the metric depth of the contract (issue 8): ``object_distance`` when the main-lens
+    depth : the metric depth of the public contract: ``object_distance`` when the main-lens
         geometry is known, else ``None`` (``image_depth`` is there either way);
         ``depth_kind`` says which metric maps exist (``"object"`` or ``"image"`` only).
     candidates : the candidate disparities of the plane sweep (view px per view step).

@@ -80,7 +80,7 @@ def gauss_newton_refine(views: torch.Tensor, au, av, disparity: torch.Tensor,
     volume). This removes the plane sweep's sampling of ``δ``. Bilinear, not bicubic: linear
     interpolation errs only in amplitude, symmetrically in the fractional shift, so the errors of
     the views at ``±a`` cancel in the normal equations; torch's bicubic (Keys, a = −0.75) is only
-    first-order accurate and its position error biased the disparity by ~0.02 px.
+    first-order accurate in position, a bias the normal equations keep.
     With ``occlusion`` each pixel uses the view group (full pupil or one of the four
     half-pupils) whose aligned views agree best, as the cost volume does. The total change is
     clipped to ``±max_change`` view px around the input (the plane sweep decides the basin);

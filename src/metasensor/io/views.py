@@ -1,11 +1,11 @@
 """View stacks on disk: multi-page TIFF (page ``u * nnum + v`` = view (u, v)) or Zarr.
 
-The TIFF layout is the authors' "meta image" layout (interface.md). The TIFF's ImageDescription
-(and the Zarr array's attributes) is the system configuration as JSON, ``cfg.to_dict()`` at the top
-level (``SystemConfig.from_json(description)`` reads it back), plus one key ``"metasensor"`` with
-what else the writer knows (``kind``, ``view_shape``, extras). Readers also accept a bare
-configuration and the older layout, which nested it under ``["metasensor"]["config"]``.
-
+The TIFF layout is the authors' "meta image" layout (docs/conventions.md). The TIFF's
+ImageDescription (and the Zarr array's attributes) is the system configuration as JSON,
+``cfg.to_dict()`` at the top level (``SystemConfig.from_json(description)`` reads it back), plus
+one key ``"metasensor"`` with what else the writer knows (``kind``, ``view_shape``, extras).
+Readers also accept a bare configuration and the older layout, which nested it under
+``["metasensor"]["config"]``.
 TIFF view stacks of uint8/uint16/float32 also carry ImageJ metadata (a second ImageDescription
 tag: a stack of nnum² slices labelled "view u=.. v=..", so that ``tifffile.imread`` keeps
 returning the pages in order; pixel size ``mla_pitch / scan`` in µm, the spacing of a view's
@@ -31,7 +31,8 @@ __all__ = ["write_views", "read_views", "read_config_from_views", "description",
 
 def description(cfg: SystemConfig | None, **meta) -> dict:
     """The metadata of a TIFF or Zarr this package writes: ``cfg.to_dict()`` at the top level
-    (what interface.md asks of a view stack's description) and ``meta`` under ``"metasensor"``."""
+    (what docs/conventions.md asks of a view stack's description) and ``meta`` under
+    ``"metasensor"``."""
     out = dict(cfg.to_dict()) if cfg is not None else {}
     out["metasensor"] = dict(meta)
     return out
@@ -87,8 +88,8 @@ def view_pixel_size(cfg: SystemConfig) -> float:
 def _imagej_tags(views: np.ndarray, cfg: SystemConfig | None, text: str
                  ) -> tuple[list, dict]:
     """The ImageDescription tags of a view stack: the JSON description first (what
-    ``page.description`` returns: interface.md), then, where ImageJ can hold the stack (uint8,
-    uint16 or float32 under 4 GB), an ImageJ stack description (nnum² slices, so that
+    ``page.description`` returns: docs/conventions.md), then, where ImageJ can hold the stack
+    (uint8, uint16 or float32 under 4 GB), an ImageJ stack description (nnum² slices, so that
     ``tifffile.imread`` still returns the pages in order, page ``u·nnum + v`` = view (u, v);
     slice labels "view u=.. v=..", µm units, the image-plane sample spacing as the resolution).
     Returns (extratags, more tifffile.imwrite keywords)."""

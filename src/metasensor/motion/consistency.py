@@ -1,37 +1,24 @@
 """Significance of a motion hypothesis in the dense view domain (leave-one-out test).
 
 A flow estimated between two scan-phase sub-images (sampled every ``p`` view pixels) is
-biased wherever the sub-images alias: a static scene then yields a *pseudo-flow*. Measured
-with the smooth non-rigid registration of :func:`.flow.registration_flows` (smoothed 1 px) on
-static, noise-free natural views (Gaussian blur 1 view px; 13, 27 and 40 px sub-images, two
-scenes each): median 0.7-1.2 view px, about as large as the 1 px r.m.s. turbulence it is
-meant to find (flow median 1.4-1.7 there). The warping residual between the two sub-images
-(:func:`.flow.motion_confidence`, the quantity the registration minimises) cannot tell them
-apart: ratio motion/static below 0.5 at 0.3-11 % of the static samples and at only 29-64 % of
-the turbulent ones.
+biased wherever the sub-images alias: a static scene then yields a *pseudo-flow* about as large
+as the turbulence it is meant to find, and the warping residual between the two sub-images
+(:func:`.flow.motion_confidence`, the quantity the registration minimises) cannot tell the two
+apart.
 
 The dense view itself is sampled finely enough to resolve the scene: there the question
 becomes whether the moved samples agree with their neighbours from *other* frames. Every
 sample is predicted from the samples around it (Gaussian kernel regression, itself left out)
 once at the grid positions (static hypothesis) and once at the moved positions ``P + M``
 (motion hypothesis). A pseudo-flow scatters a static scene's samples and raises that error;
-a true flow gathers a moving scene's samples and lowers it. Measured on the same views: error
-ratio motion/static median 2.6-3.4 on the static views (below 0.5 at 0.2-0.5 % of the
-samples) and 0.23-0.31 on the turbulent ones (below 0.5 at 68-81 %).
+a true flow gathers a moving scene's samples and lowers it.
 
 The test assumes the dense view is smooth at the kernel's scale. Where the sub-images do not
-resolve the content at all, that fails and no flow means anything: a star's view is a disk about
-one lenslet (p view px) wide, one sample per sub-image, and the registration returned flows of
-2.4 view px (median) on a static simulated star grid (240 px, 30 dB); the leave-one-out errors
-at the disks' sharp rims then "passed" 42 % of the samples, and 74.6 % of that static capture
-was moved (reconstruction PSNR 30.09 -> 29.03 dB; with D/r0 = 4 turbulence 29.17 -> 29.04: no
-gain). :func:`resolved_fraction` measures how much of the local contrast the sub-images resolve
-(the view low-passed at their scale against the view itself). Measured on simulated 30 dB
-views (centre and an outer view each): star grids 0.03-0.08 (10th-90th percentile, static and
-D/r0 = 6; largest 0.12), charts and natural views 0.22-0.67 (static 210 px, turbulent 420 px,
-and the synthetic turbulence of the tests), white noise on a flat background about 1/(π p²).
-Below :data:`RESOLVED_MIN` a sample gives no evidence.
-Hand-written.
+resolve the content at all (a star's view is a disk about one lenslet, ``p`` view px, wide: one
+sample per sub-image) no flow means anything. :func:`resolved_fraction` measures how much of the
+local contrast the sub-images resolve (the view low-passed at their scale against the view
+itself); below :data:`RESOLVED_MIN` a sample gives no evidence. The measurements behind this
+design are in ``docs/decisions.md`` (2026-11-25, motion evidence). Hand-written.
 """
 
 from __future__ import annotations
@@ -99,9 +86,8 @@ def dense_confidence(view: np.ndarray, order: list[tuple[int, int]], motion: np.
     a Gaussian ``window`` (sub-image px). < 1: the motion makes the dense view more
     consistent. Samples that the motion isolates count with their static error. Where the
     static error is below the floor ``(floor_frac · range)²``, or the motion lowers it by less
-    than that, there is no evidence of motion: ratio 1. (A flat background has zero error both
-    ways; its ratio 0/0 read as 0 passed the meaningless flows there, and hole filling then
-    moved a whole static object: 88.9 % of a patch-on-black view.) Where the sub-images do not
+    than that, there is no evidence of motion: ratio 1 (a flat background has zero error both
+    ways, not a ratio of 0). Where the sub-images do not
     resolve the content (:func:`resolved_fraction` below ``resolved_min``: point sources, noise
     on a flat background) there is no evidence either: ratio 1. ``resolved``: that fraction
     when the caller already has it (else computed here)."""

@@ -12,10 +12,9 @@ Object motion: one flow (centre view, or the sharpest) serves all views, and the
 plan (triangulation) is built once. Turbulence: every view gets its own smooth flow from
 non-rigid registration; a registration flow counts only where it makes the dense view more
 consistent (:mod:`.consistency`), since between aliased sub-images a static scene yields flows
-of about a view pixel (a static 210-px simulated chart had 65.9 % of its centre view moved and
-its reconstruction SSIM fell from 0.90 to 0.33 before this test); content the sub-images do
-not resolve (a star field: 74.6 % of a static one's samples moved before) gives no evidence
-(the moving region is then closed and filled as for object motion).
+of about a view pixel; content the sub-images do not resolve (a star field) gives no evidence
+(the moving region is then closed and filled as for object motion). Measurements behind these
+choices: ``docs/decisions.md`` (2026-11-25, motion evidence).
 """
 
 from __future__ import annotations
@@ -46,7 +45,7 @@ __all__ = ["correct_motion", "correct_motion_views", "correct_motion_sequence",
 
 def _resolve(scan_order, reference, shape) -> tuple[list[tuple[int, int]], int, int]:
     if scan_order is None or isinstance(scan_order, str):
-        # None = row-major (interface.md); a preset name; period: the default configuration's
+        # None = row-major (docs/conventions.md); a preset name; period: the default configuration's
         from metasensor.config import SystemConfig
 
         order = check_scan_order(scan_order, SystemConfig().scan)
@@ -223,16 +222,15 @@ def correct_motion(view_image: np.ndarray, scan_order: Sequence | str | None,
                    *, method: str = "dis", scatter: str = "linear", threshold: float = 0.5,
                    smooth: float = 1.0, max_ratio: float = 0.5,
                    motion: np.ndarray | None = None, evidence: bool = False) -> np.ndarray:
-    """Remove the scan artefacts of moving objects from one realigned view (interface.md).
+    """Remove the scan artefacts of moving objects from one realigned view (docs/conventions.md).
 
     view_image: ``(H, W)``, sample (y, x) taken at frame ``scan_order.index((y % p, x % p))``;
     scan_order: list of (row, col) phases (period = sqrt of its length), or None (row-major) /
     "row-major" / "serpentine" with the default configuration's period (5); reference: index
     into scan_order of the time to align to (default: the middle one).
     method: optical flow "dis" (default) / "farneback", or "registration" (turbulence);
-    scatter: "linear" (default: barycentric on the Delaunay triangulation; measured at least
-    as good as the paper's cubic on the test scenes and faster) or "cubic" (Clough–Tocher =
-    scipy griddata "cubic", as the paper); threshold: motions below this
+    scatter: "linear" (default: barycentric on the Delaunay triangulation) or "cubic"
+    (Clough–Tocher = scipy griddata "cubic", as the paper); threshold: motions below this
     (view px) are flow noise and ignored, as are motions that do not lower the warping residual
     below ``max_ratio`` times that of "no motion"; motion: a precomputed ``(2, H, W)`` field
     (skips the flow); evidence: per-sample gating and brightness matching

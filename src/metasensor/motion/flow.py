@@ -8,8 +8,8 @@ sub-image pixels) of a static scene equals the sampling-phase offset
 ``M = p·g − (r − r_ref, c − c_ref)`` and its motion-corrected position at the reference time
 is ``Q = P + M`` (the paper's (x + Δx, y + Δy)).
 
-Flow engines: OpenCV DIS (default; measured more accurate than Farneback on aliased sub-images,
-see tests/motion) or Farneback, each initialised from the already estimated neighbouring frame
+Flow engines: OpenCV DIS (default; ``tests/motion`` compares it with Farneback on aliased
+sub-images) or Farneback, each initialised from the already estimated neighbouring frame
 (closer in time to the reference), which keeps large motions (many pixels per frame) in range;
 or, for turbulence, the smooth non-rigid registration of :mod:`metasensor.align.nonrigid`.
 """
@@ -125,8 +125,8 @@ def occlusions(view: np.ndarray, order: list[tuple[int, int]], reference: int,
 
 @contextlib.contextmanager
 def _few_threads(device):
-    """Small CPU problems (sub-images) run faster on one torch thread than on many: measured
-    9x on 24 sub-images of 40 x 40 on a busy 2-core machine. Restores the setting afterwards."""
+    """One torch thread for the small CPU problems of sub-images (thread start-up outweighs
+    their work); restores the setting afterwards."""
     import torch
 
     from metasensor.backend import resolve_device
@@ -145,10 +145,8 @@ def _few_threads(device):
 def registration_grid(shape: tuple[int, int], grid: tuple[int, int] = (6, 6),
                       spacing: float = MIN_CONTROL_SPACING) -> tuple[int, int]:
     """Control points per sub-image side: at most ``grid``, and no denser than one per
-    ``spacing`` sub-image px (the default 6 x 6 on the 40-px sub-images of the tests: 7.8 px).
-    A fixed 6 x 6 grid on the 13-px sub-images of ``simulate --size 210`` fitted 72 parameters
-    to 169 samples: median 1.8 view px of motion on a static chart (1.2 on 27-px sub-images).
-    This gives 2 x 2 at 13 px, 4 x 4 at 27 px, 6 x 6 at 40 px."""
+    ``spacing`` sub-image px, so that the grid's parameters stay well below the sub-image's
+    samples (2 x 2 at 13 px, 4 x 4 at 27 px, 6 x 6 at 40 px)."""
     return tuple(max(1, min(int(g), 1 + int((n - 1) // spacing)))
                  for g, n in zip(grid, shape, strict=True))
 

@@ -1,8 +1,8 @@
 """Synthetic dynamic scenes at the view level, and the scan-artefact measure.
 
 A realigned view sample at ``(Y, X)`` was taken at time ``t = index of (Y % p, X % p) in
-scan_order`` (interface.md). A dynamic scene is a fixed texture ``I0`` seen through a time- and
-position-dependent displacement: the sample sees ``I0((Y, X) + m_t(Y, X))``. The truth at the
+scan_order`` (docs/conventions.md). A dynamic scene is a fixed texture ``I0`` seen through a time-
+and position-dependent displacement: the sample sees ``I0((Y, X) + m_t(Y, X))``. The truth at the
 reference time is ``I0((Y, X) + m_ref(Y, X))`` on the dense grid. ``I0`` is sampled by cubic
 spline interpolation of a finer scene (``upsample`` times finer), so the test data are not made
 with the interpolators used by the correction (no inverse crime).

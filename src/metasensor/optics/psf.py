@@ -1,6 +1,7 @@
 """Wave-optics PSFs: the coded-MLA phase-space PSF bank and the conventional widefield PSF.
 
-Hand-written (system.md §3, docs/conventions.md): no library models a microlens-array sensor.
+Hand-written (Wu et al. 2022, Methods; docs/conventions.md): no library models a microlens-array
+sensor.
 
 Model of :func:`view_psfs`, for every point position s inside the central lenslet:
 pupil ``P(rho) = A exp(i 2π W)`` -> coherent field at the MLA ``U0(r) = ∫P exp(−i2π(NA/λ)rho·r)``

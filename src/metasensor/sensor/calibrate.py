@@ -8,15 +8,11 @@ Method (hand-written; numpy/scipy do the transforms and the optimisation):
 2. Each peak is refined sub-bin by maximising the windowed DFT magnitude ``|F(g)|`` over the
    continuous frequency (Newton steps with analytic derivatives; ``F(g) = e_y(g)^T (I w)
    e_x(g)`` and its derivatives cost one pass over the image). On a white frame the maximum
-   is unbiased (simulated 192-px frames: pitch 15.0001-15.0010 px for 0-0.5 λ r.m.s. of
-   aberration). On a textured frame the scene's own spectrum near the lattice frequency adds to
-   the peak and moves it: 192-px frames of the chart, camera, astronaut and coffee scenes read
-   14.93-15.09 px (up to 0.6 %, 0.5 px of lenslet position 6 lenslets out); higher harmonics
-   (2-4 g) did not remove it (14.97-15.06), nor did dividing the frame by its lenslet-scale
-   mean (14.93-15.08). The bias falls fast with the frame's size (the lattice peak grows with
-   the area, the scene's spectrum near it much less): 384-px frames read 14.990-15.019 px,
-   768-px frames 14.998-15.004 px (0.1 px of lenslet position at the frame's edge, 25 lenslets
-   out). Calibrate from a white frame where one exists, else from the whole sensor.
+   is unbiased. On a textured frame the scene's own spectrum near the lattice frequency adds to
+   the peak and moves it; the bias falls fast with the frame's size (the lattice peak grows with
+   the area, the scene's spectrum near it much less). Calibrate from a white frame where one
+   exists, else from the whole sensor (figures: ``docs/decisions.md``, 2026-11-25, lenslet-grid
+   calibration).
 3. Pitch and rotation are the similarity that fits both peaks; the phases of ``F(g1)``,
    ``F(g2)`` (coordinates relative to the window centre) give a lattice point: a lenslet centre.
 4. Scan-phase offsets: the phase change of the same two Fourier components between frames
@@ -97,7 +93,7 @@ def _lit_span(profile: np.ndarray, min_len: int) -> tuple[int, int]:
 
 def _crop(img: np.ndarray, min_side: int = 1) -> tuple[np.ndarray, np.ndarray]:
     """The lit part of the frame (dark edge strips off: their hard edge inside the Hann window
-    biases the lattice fit, +0.012 px of pitch on a simulated 192-px white frame), centrally
+    biases the lattice fit), centrally
     cropped to at most ``_MAX_SIDE`` per axis; returns (crop, its (row, col) origin)."""
     r0, r1 = _lit_span(img.mean(axis=1), min_side)
     c0, c1 = _lit_span(img.mean(axis=0), min_side)

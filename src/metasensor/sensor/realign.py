@@ -1,4 +1,4 @@
-"""Pixel realignment: raw frames of one scan period <-> view stacks (interface.md contract).
+"""Pixel realignment: raw frames of one scan period <-> view stacks (docs/conventions.md).
 
 ``moving="mla"`` (the meta-imaging sensor): at scan phase (r, c) the block of nnum x nnum pixels
 behind lenslet (ly, lx) sits at sensor rows ``ly*nnum + r*d``, columns ``lx*nnum + c*d``
@@ -116,7 +116,7 @@ def realign(frames, cfg: SystemConfig, scan_order=None, moving: str | None = Non
     """Raw frames ``(T, H, W)`` of one scan period → views ``(nnum, nnum, Ly*p, Lx*p)``.
 
     ``T = cfg.scan**2`` rectified frames in ``scan_order`` (None: row-major; a preset name or a
-    list of (row, col) phases). ``dtype``: of the views, float32 by default (interface.md;
+    list of (row, col) phases). ``dtype``: of the views, float32 by default (docs/conventions.md;
     exact for sensor data up to 24 bits); ``None`` keeps the frames' dtype (uint16 views take
     half the memory). ``out``: optional preallocated C-contiguous output of that shape and of
     the frames' dtype (``dtype`` is then ignored). ``engine``: ``"auto"`` (compiled gather for

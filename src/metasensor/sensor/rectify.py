@@ -4,12 +4,10 @@ with lenslet (0, 0) of phase (0, 0) at pixels ``[0:nnum, 0:nnum]`` (the input of
 The map is the affine one of :class:`~metasensor.sensor.calibration.Calibration`; each frame is
 resampled on its own phase's grid (measured offsets), so per-phase piezo errors are removed from
 the block positions. Interpolators: ``"spline"`` (scipy.ndimage.affine_transform, cubic
-B-spline with prefilter: the most accurate, default), ``"cubic"`` / ``"lanczos"`` (OpenCV
-warpAffine: faster, coordinates quantised to 1/32 px). When the grid is already exact the frame
-is only cropped (no interpolation). Measured on the synthetic captures of
-tests/sensor (pitch 14.7-15.3 px, rotation <= 1 deg): views PSNR 42.6-43.8 dB with ``"lanczos"``,
-42.1-43.3 dB with ``"spline"``, 39.7-40.7 dB with ``"cubic"``; Lanczos is ~5x faster than the
-spline, hence the default.
+B-spline with prefilter), ``"lanczos"`` (the default) and ``"cubic"`` (OpenCV warpAffine,
+coordinates quantised to 1/32 px). When the grid is already exact the frame is only cropped (no
+interpolation). Why Lanczos is the default (accuracy and speed measured on the synthetic
+captures of ``tests/sensor``): ``docs/decisions.md`` (2026-11-25, lenslet-grid calibration).
 """
 
 from __future__ import annotations

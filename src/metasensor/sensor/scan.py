@@ -1,4 +1,4 @@
-"""Scan orders: the sequence of (row, col) scan phases in acquisition order (interface.md).
+"""Scan orders: the sequence of (row, col) scan phases in acquisition order (docs/conventions.md).
 
 Orders are zero-based everywhere in the API; :func:`from_one_based` converts the one-based
 row/column lists of MATLAB tools, :func:`read_order_png` reads the authors' scan-pattern images.

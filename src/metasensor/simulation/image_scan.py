@@ -1,6 +1,6 @@
 """Captures of a scanning light-field system whose *image* moves over a fixed MLA (any period).
 
-Geometry (interface.md, ``moving="image"``). Lenslet (ly, lx) covers sensor pixels
+Geometry (docs/conventions.md, ``moving="image"``). Lenslet (ly, lx) covers sensor pixels
 ``[ly·nnum, (ly+1)·nnum)`` at every phase; at scan phase (r, c) the image is displaced by
 ``−(r, c)·nnum/p`` sensor pixels, so view sample (Y, X) (lenslet ``Y // p``, phase ``Y % p``)
 sees the scene at the lenslet-centre position ``nnum//2 + ½ + Y·nnum/p`` (sensor px, pixel edges
