@@ -13,6 +13,7 @@ import torch
 from metasensor.phasespace.dottest import dot_test
 from metasensor.phasespace.masked_normal import BandNormal, masked_normal
 from metasensor.phasespace.operator import PhaseSpaceOperator, make_geometry
+from metasensor.phasespace.space_variant import SpaceVariantOperator, corner_weights
 from metasensor.solvers.krishnan_fergus import psf2otf
 from metasensor.solvers.priors import GRADIENT, IDENTITY
 from recon_standin import one_torch_thread  # noqa: F401
@@ -57,6 +58,17 @@ def _masked_direct():
     return direct, direct, op.domain_shape, op.domain_shape
 
 
+def _space_variant(normal: bool = False):
+    g = make_geometry((9, 8), 3, 5)
+    banks = [np.random.default_rng(s).random((7, 11, 11)).astype(np.float32) for s in range(4)]
+    w = corner_weights(g, (0, 0), (3, 24, 3, 21))
+    op = SpaceVariantOperator(banks, w, g, device="cpu", chunk=3)
+    if not normal:
+        return op.forward, op.adjoint, op.domain_shape, op.range_shape
+    direct = op.masked_normal(_rect_mask(op))
+    return direct, direct, op.domain_shape, op.domain_shape
+
+
 def _gradient():
     return GRADIENT.forward, GRADIENT.adjoint, (3, 12, 10), (2, 3, 12, 10)
 
@@ -87,6 +99,8 @@ OPERATORS = {
     "folded normal": _normal,
     "band normal": _band_normal,
     "masked normal (direct)": _masked_direct,
+    "space-variant phasespace": _space_variant,
+    "space-variant masked normal": lambda: _space_variant(True),
     "gradient stencil": _gradient,
     "identity": _identity,
     "single-kernel convolution": _convolution,

@@ -133,6 +133,9 @@ def _check_call(cfg, method: str, zernike, field_zernike, opts: ReconOptions) ->
     if opts.psf is not None and method != "isa":
         raise ValueError(f"method={method!r} builds each block's bank from its DAO estimate; a "
                          "given psf would be used unchanged: pass psf_fn, or method='isa'")
+    if opts.space_variant and (method != "isa" or opts.psf is not None):
+        raise ValueError("space_variant builds banks at the blocks' corners from the aberration: "
+                         "use it with method='isa' and no psf")
     if opts.psf is not None and (field_zernike is not None or (
             zernike is not None and np.any(np.asarray(zernike, dtype=float)))):
         raise ValueError("psf is a complete PSF bank, so zernike/field_zernike would be ignored: "
@@ -177,7 +180,8 @@ def _tasks(views, cfg: SystemConfig, method: str, grid, zern, opts: ReconOptions
             block=b, cfg=cfg, views=np.asarray(views[:, :, sy, sx], np.float32) if ship else views,
             uv=plan["uv"], zernike=zern[b.index], solver=plan["solver"], dao=dao, psf=opts.psf,
             psf_fn=opts.psf_fn, register=bool(opts.register), pad=opts.pad,
-            device=plan["device"], windowed=ship, progress=plan["tick"] if local else None))
+            device=plan["device"], windowed=ship, progress=plan["tick"] if local else None,
+            corner_zernike=None if plan["corners"] is None else plan["corners"][b.index]))
     return out
 
 
@@ -246,6 +250,8 @@ def reconstruct(views, cfg: SystemConfig, method: str = "isa", zernike=None, fie
     grid = _block_grid(blocks)
     d = cfg.scan_step_px
     solver = opts.resolved_solver(d)
+    if opts.space_variant and solver != "hqs":
+        raise ValueError(f"space_variant needs solver='hqs' (got {solver!r})")
     psf = _check_psf(opts.psf, cfg, opts)
     opts = ReconOptions.resolve(opts, {"psf": psf})
     shape = (views.shape[2] * d, views.shape[3] * d)
@@ -257,9 +263,14 @@ def reconstruct(views, cfg: SystemConfig, method: str = "isa", zernike=None, fie
 
     uv = view_order(cfg.view_mask(opts.view_radius), opts.order)
     solver_opts, subsets = _solver_options(opts, solver, len(uv), d)
+    corners = None
+    if opts.space_variant:
+        from metasensor.recon.space_variant import corner_zernikes
+
+        corners = corner_zernikes(block_list, shape, zernike, field_zernike)
     return _run(views, cfg, method, grid, zern, opts, {
         "blocks": block_list, "uv": subset_major(uv, subsets), "solver": solver_opts,
-        "subsets": subsets, "shape": shape, "t0": t0, "name": solver})
+        "subsets": subsets, "shape": shape, "t0": t0, "name": solver, "corners": corners})
 
 
 def _run(views, cfg, method, grid, zern, opts: ReconOptions, plan: dict) -> Reconstruction:

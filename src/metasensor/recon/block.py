@@ -58,6 +58,7 @@ class BlockTask:
     device: str | None = None
     windowed: bool = False
     progress: Any = None  # callable(n), local runs only
+    corner_zernike: np.ndarray | None = None  # (4, J): the space-variant model's field points
 
 
 @dataclass
@@ -157,20 +158,33 @@ def _operator(task: BlockTask, psf: np.ndarray, data_win: np.ndarray):
 
 def reconstruct_block(task: BlockTask) -> BlockResult:
     """Window → bank → optional registration → solve (module docstring) for one block."""
-    import torch
-
-    from metasensor.solvers import solve
-
     cfg = task.cfg
     window = _window(task)
+    rows, cols = [u for u, _ in task.uv], [v for _, v in task.uv]
+    if task.corner_zernike is not None:  # banks at the core's corners, blended
+        from metasensor.recon.space_variant import space_variant_operator
+
+        op, registration, reg_zernike = space_variant_operator(task, window[rows, cols], rows,
+                                                               cols)
+        return _solve(task, op, window[rows, cols], np.asarray(task.zernike, np.float32), [],
+                      registration, reg_zernike)
     bank, zernike, dao_history = _bank(task, window)
     bank = np.asarray(bank, dtype=np.float32)
     if bank.ndim != 4 or bank.shape[:2] != (cfg.nnum, cfg.nnum):
         raise ValueError(f"psf bank must have shape (nnum, nnum, K, K) with nnum = {cfg.nnum}, "
                          f"got {bank.shape}")
-    rows, cols = [u for u, _ in task.uv], [v for _, v in task.uv]
     op, registration, reg_zernike = _operator(task, bank[rows, cols], window[rows, cols])
-    data, mask = op.geometry.embed(torch.from_numpy(window[rows, cols]).to(op.device))
+    return _solve(task, op, window[rows, cols], zernike, dao_history, registration, reg_zernike)
+
+
+def _solve(task: BlockTask, op, data_win: np.ndarray, zernike, dao_history, registration,
+           reg_zernike) -> BlockResult:
+    """Solve the block on ``op`` and cut its region out of the estimate."""
+    import torch
+
+    from metasensor.solvers import solve
+
+    data, mask = op.geometry.embed(torch.from_numpy(data_win).to(op.device))
     result = solve(op, data, mask, task.solver, progress=task.progress)
     image = op.geometry.crop(result.estimate).detach().cpu().numpy()
     ry, rx = task.block.region_in_window()

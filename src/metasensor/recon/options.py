@@ -52,6 +52,11 @@ class ReconOptions:
         Pixels of view data around each block (default: a given bank's radius, else nnum).
     pad : bool
         Pad the estimate by the PSF radius (linear convolution; False: circular, for study).
+    space_variant : bool
+        Model each block with PSF banks at its core's four corners, blended bilinearly inside
+        the operator (:mod:`metasensor.recon.space_variant`), instead of one bank at its
+        centre: PSFs continuous across blocks for aberrations that change inside a block.
+        ``method="isa"`` with the HQS solver only; about 4x the solve's cost. Default False.
     dao : DaoOptions or None
         DAO's settings for ``method="wave"``/``"geometric"`` (its ``method`` is set from
         ``reconstruct``'s).
@@ -80,6 +85,7 @@ class ReconOptions:
     order: str = "spiral"
     margin: int | None = None
     pad: bool = True
+    space_variant: bool = False
     dao: DaoOptions | None = None
     device: Any = None
     psf: Any = None
@@ -106,6 +112,8 @@ class ReconOptions:
             raise TypeError("solver_options must be HQSOptions")
         if self.dao is not None and not isinstance(self.dao, DaoOptions):
             raise TypeError("dao must be DaoOptions")
+        if not isinstance(self.space_variant, bool):
+            raise TypeError(f"space_variant must be True or False, got {self.space_variant!r}")
         if self.psf_fn is not None and not callable(self.psf_fn):
             raise TypeError("psf_fn must be callable(cfg, zernike, device)")
 

@@ -68,7 +68,11 @@ def write_html_report(path: str | Path, summary: dict, title: str = "metasensor 
     one row per value) as an HTML page, atomically."""
     figures = summary.get("figures", {})
     settings = {k: v for k, v in summary.items()
-                if k not in ("table", "figures", "config", "warnings")}
+                if k not in ("table", "figures", "config", "warnings", "bar_groups")}
+    bars = summary.get("bar_groups")
+    bar_table = ("<p>Finest resolved three-bar group (period in pixels; coarser than the "
+                 "coarsest group: &gt; that period) at each chart location.</p>"
+                 + _table(bars)) if bars else ""
     table = [{k: v for k, v in r.items() if k != "mtf_note"} for r in summary.get("table", [])]
     warnings = "".join(f'<p class="warn">warning: {html.escape(str(w))}</p>'
                        for w in summary.get("warnings", []))
@@ -91,6 +95,7 @@ th{{text-align:left;}}figure{{margin:1em 0;}}img{{max-width:100%;}}
 the field centre and the field edge (ISO 12233).</p>
 {_table(table)}
 {_mtf_notes(summary.get("table", []))}
+{bar_table}
 {figs}
 <h2>Settings</h2><table>{rows}</table>
 </body></html>

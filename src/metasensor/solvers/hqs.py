@@ -34,7 +34,6 @@ from dataclasses import dataclass
 
 import torch
 
-from metasensor.phasespace.masked_normal import masked_normal
 from metasensor.phasespace.normal import FoldedNormal
 from metasensor.phasespace.operator import PhaseSpaceOperator
 from metasensor.solvers.priors import GRADIENT, HyperLaplacian, Prior, Transform
@@ -168,15 +167,17 @@ class FoldedXStep:
     """The x-step ``(AᵀMA + μ (LᵀL + ε I)) x = rhs`` of the phase-space operator.
 
     Circular and fully observed: exact, through the folded normal operator's inverse, factored
-    once per μ. Masked: ``cg`` preconditioned conjugate-gradient iterations from the previous x
-    (from the circular solve at the start). ``mu`` is absolute (the scale of AᵀA).
+    once per μ. Masked, or ``exact`` False (``normal`` only approximates the operator's AᵀA, as
+    for :class:`metasensor.phasespace.space_variant.SpaceVariantOperator`): ``cg``
+    preconditioned conjugate-gradient iterations from the previous x (from the circular solve
+    at the start). ``mu`` is absolute (the scale of AᵀA).
     """
 
     def __init__(self, normal: FoldedNormal, data_normal, mask: torch.Tensor,
-                 transform: Transform, floor: float, cg: int) -> None:
+                 transform: Transform, floor: float, cg: int, exact: bool = True) -> None:
         self.nm, self.data_normal, self.transform = normal, data_normal, transform
         self.floor, self.cg = float(floor), int(cg)
-        self.full = bool(mask.all())
+        self.full = bool(mask.all()) and exact
         self.scale = float(normal.matrix.diagonal(dim1=-2, dim2=-1).real.max())
         sym = transform.symbol(normal.geometry.domain, normal.device) + self.floor
         self.reg = normal.fold(sym.to(torch.complex64)).real
@@ -222,7 +223,7 @@ def hqs(op: PhaseSpaceOperator, y, mask, options: HQSOptions = HQSOptions(), *,
 
     Parameters
     ----------
-    op : PhaseSpaceOperator
+    op : PhaseSpaceOperator or SpaceVariantOperator
         The forward model; its folded normal operator is built here.
     y : array_like
         ``(V, My, Mx)`` view samples on the operator's sample grid (zero where unobserved), in
@@ -249,12 +250,14 @@ def hqs(op: PhaseSpaceOperator, y, mask, options: HQSOptions = HQSOptions(), *,
     unit = 2.0 * level  # image normalised to mean 0.5
     yn = y / unit
     nm = op.normal()
-    data_normal = masked_normal(op, nm, m)
-    smooth = FoldedXStep(nm, data_normal, m, GRADIENT, REG_FLOOR, INIT_CG)
+    data_normal = op.masked_normal(m, nm)
+    exact = bool(getattr(op, "normal_is_exact", True))
+    smooth = FoldedXStep(nm, data_normal, m, GRADIENT, REG_FLOOR, INIT_CG, exact)
     aty = op.adjoint(yn)
     x = smooth.at(options.init_reg * smooth.scale)(aty, None)  # the smooth start
     lam = _data_weight(op, smooth, aty, y, m, unit, options)
-    xstep = FoldedXStep(nm, data_normal, m, options.prior.transform, REG_FLOOR, options.cg)
+    xstep = FoldedXStep(nm, data_normal, m, options.prior.transform, REG_FLOOR, options.cg,
+                        exact)
     norm_y = max(float(torch.linalg.vector_norm(yn)), 1e-30)
     history: list[float] = []
 
