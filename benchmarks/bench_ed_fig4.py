@@ -22,7 +22,9 @@ window ``SIM_EXTRA`` pixels wider on each side, so the data hold light the model
 ray reach + 10-20 px, and the data lack the far diffraction tails of the most tilted views.
 Full mode: two scenes of 150 × 150 pixels (10 × 10 lenslets; 240 × 240 at 3 λ, ``BIG_BLOCK``),
 three draws per level, wave and geometric DAO with at most 3 updates (8 at 3 λ).
-``ED_FIG4_LEVELS=0.5,1`` runs a subset of the levels.
+``ED_FIG4_LEVELS=0.5,1`` runs a subset of the levels; ``ED_FIG4_CASES=FILE`` keeps the finished
+cases in FILE instead of ``results/ed_fig4_cases.jsonl`` (a re-run that measures afresh, leaving
+the committed cases alone).
 ISA here is the paper's Richardson–Lucy (``solver="rl"``, 5 iterations, 16 subsets) for every
 mode, as in the figure; the library's default solver (the sparse-gradient prior) is not used.
 """
@@ -243,6 +245,8 @@ def run(quick: bool = False) -> list[dict]:
 
     done_file = HERE / "results" / ("ed_fig4_quick_cases.jsonl" if quick else
                                     "ed_fig4_cases.jsonl")
+    if os.environ.get("ED_FIG4_CASES"):
+        done_file = Path(os.environ["ED_FIG4_CASES"])
     done: dict = {}
     if done_file.exists():
         for line in done_file.read_text().splitlines():

@@ -29,6 +29,13 @@ Studies (the ``study`` column):
   ``results/quality_aberrated.json``) and merged into the table when present. Its
   ``2D+prior`` row deconvolves with the true aberrated PSF (an oracle the 2D sensor lacks).
 
+- ``photos-aberrated`` / ``photos-focus``: the six photographs under 1 and 3 λ through wave DAO
+  and 0.25 λ off focus (``benchmarks/quality_photos.py``; ``--photos``, written to
+  ``results/quality_photos.json`` case by case and merged into the table when present).
+- ``--limit``: the linear-MMSE (Wiener) limit of the meta-imaging sensor and the 2D sensor on the
+  six photographs from the operators' spectra (``benchmarks/quality_limit.py``,
+  ``results/quality_limit.json``).
+
 Figures: ``results/quality.png`` (SSIM and resolved frequency per scene, and against the focus
 offset).
 """
@@ -181,6 +188,8 @@ def run(quick: bool = False, sink=None) -> list[dict]:
             sink(rows)
     if not quick and ABERRATED_JSON.is_file():
         rows += json.loads(ABERRATED_JSON.read_text())["rows"]
+    if not quick and (HERE / "results" / "quality_photos.json").is_file():  # --photos rows
+        rows += json.loads((HERE / "results" / "quality_photos.json").read_text())["rows"]
     _plot(rows, HERE / "results" / ("quality_quick.png" if quick else "quality.png"))
     return rows
 
@@ -233,7 +242,19 @@ def _plot(rows: list[dict], path: Path) -> None:
 
 
 if __name__ == "__main__":
-    if "--aberrated" in sys.argv:
+    if "--photos" in sys.argv:  # the natural photographs' studies (benchmarks/quality_photos.py)
+        sys.path.insert(0, str(HERE))
+        import quality_photos
+
+        which = [a for a in ("aberrated", "focus") if a in sys.argv] or ["aberrated", "focus"]
+        for row in quality_photos.run(tuple(which)):
+            print(row)
+    elif "--limit" in sys.argv:  # the linear-MMSE limit (benchmarks/quality_limit.py)
+        sys.path.insert(0, str(HERE))
+        import quality_limit
+
+        quality_limit.run()
+    elif "--aberrated" in sys.argv:
         quick = "--quick" in sys.argv
         result = run_aberrated(quick=quick)
         if not quick:

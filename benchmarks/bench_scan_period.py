@@ -29,6 +29,10 @@ and 0.87 to 0.94 noise-free, while 15x15 barely changes).
 Two ISA solvers (``solver``): ``rl``, Richardson–Lucy (every period), and ``hqs``, the
 sparse-gradient prior (``reconstruct``'s default where it applies: periods 3, 5, 15; a 1x1 scan
 would need 225 x 225 systems per frequency).
+
+Subsets of the full run (the same sizes and rows, for a re-run on a busy machine):
+``SCAN_PERIOD_BUDGETS=per-frame`` (comma-separated budgets) and ``SCAN_PERIOD_FOCUS=0,0.25``
+(defocus values among ``DEFOCUS``).
 """
 
 from __future__ import annotations
@@ -67,6 +71,26 @@ def truth_scale(cap, bank) -> float:
     return float(cap.views_clean[c, c][inner].sum() / max(pred[inner].sum(), 1e-30))
 
 
+def _subset(budgets: tuple, focus: tuple) -> tuple[tuple, tuple]:
+    """``budgets`` and ``focus`` narrowed by ``SCAN_PERIOD_BUDGETS`` / ``SCAN_PERIOD_FOCUS``."""
+    import os
+
+    env_b, env_f = os.environ.get("SCAN_PERIOD_BUDGETS"), os.environ.get("SCAN_PERIOD_FOCUS")
+    if env_b:
+        want = [b.strip() for b in env_b.split(",")]
+        bad = [b for b in want if b not in budgets]
+        if bad:
+            raise ValueError(f"SCAN_PERIOD_BUDGETS: unknown budget(s) {bad}; valid: {budgets}")
+        budgets = tuple(want)
+    if env_f:
+        want_f = [float(v) for v in env_f.split(",")]
+        bad_f = [v for v in want_f if v not in focus]
+        if bad_f:
+            raise ValueError(f"SCAN_PERIOD_FOCUS: unknown defocus {bad_f}; valid: {focus}")
+        focus = tuple(want_f)
+    return budgets, focus
+
+
 def run(quick: bool = False) -> list[dict]:
     from skimage.metrics import structural_similarity
 
@@ -84,6 +108,7 @@ def run(quick: bool = False) -> list[dict]:
     rows = []
     budgets = ("per-frame",) if quick else ("per-frame", "equal-light", "noise-free")
     focus = DEFOCUS[:1] if quick else DEFOCUS
+    budgets, focus = _subset(budgets, focus)
     for df, budget, name, p in [(f, b, n, p) for f in focus for b in budgets for n in scenes
                                 for p in PERIODS]:
         scene = scenes[name]
