@@ -246,7 +246,8 @@ if __name__ == "__main__":
         sys.path.insert(0, str(HERE))
         import quality_photos
 
-        which = [a for a in ("aberrated", "focus") if a in sys.argv] or ["aberrated", "focus"]
+        studies = ("aberrated", "focus", "solver")
+        which = [a for a in studies if a in sys.argv] or list(studies)
         for row in quality_photos.run(tuple(which)):
             print(row)
     elif "--limit" in sys.argv:  # the linear-MMSE limit (benchmarks/quality_limit.py)

@@ -14,6 +14,9 @@ Six scikit-image photographs (camera, astronaut, coffee, chelsea, rocket, grass)
   PSFs: the true aberrated one (``2D+prior (true PSF)``, an oracle the 2D sensor lacks) and the
   widefield PSF of the wavefront the meta-imaging sensor's DAO estimated (``2D+prior (DAO
   PSF)``: the same knowledge). ``residual_rms``: DAO's wavefront error (waves, Noll 4-45).
+- ``photos-solver``: the HQS data weight ``lam_scale`` 0.1 / 0.3 (default) / 1 on the chart and
+  the photographs, aberration-free, in focus, 166-px fields (a smaller size: a study of the
+  setting, not of the acceptance).
 - ``photos-focus``: aberration-free, in focus and with the meta-imaging sensor 0.25 λ (Noll Z4)
   off the conjugate plane (``simulate(focus_offset=0.25)``, known to the reconstruction), the
   2D sensor in focus; default reconstruction (``bench_quality.case``).
@@ -22,7 +25,7 @@ Targets (issue: reconstruction quality), summarised by :func:`targets`: aberrate
 0.15, PSNR >= 2D + 5 dB, resolved frequency >= 2 x the 2D sensor's; off focus, SSIM and resolved
 frequency at least those in focus.
 
-Run: ``python benchmarks/bench_quality.py --photos [aberrated|focus]`` (one process,
+Run: ``python benchmarks/bench_quality.py --photos [aberrated|focus|solver]`` (one process,
 single-threaded). Every finished case is written at once to ``results/quality_photos.json``
 and skipped when the run is repeated; ``bench_quality.run`` merges the file's rows.
 """
@@ -42,6 +45,9 @@ PHOTOS = ("camera", "astronaut", "coffee", "chelsea", "rocket", "grass")
 SIZE = 256
 ABERRATIONS = (1.0, 3.0)
 OFFSETS = (0.0, 0.25)
+LAM_SCALES = (0.1, 0.3, 1.0)  # HQS data weight study (default 0.3), 166 px, in focus
+SOLVER_SIZE = 166
+SOLVER_SCENES = ("chart",) + PHOTOS
 
 
 def _module(name: str):
@@ -86,8 +92,26 @@ def focus_case(name: str, offset: float, size: int = SIZE) -> list[dict]:
     return [r for r in rows if not r["image"].startswith("2D+prior")]
 
 
+def solver_case(name: str, lam_scale: float, size: int = SOLVER_SIZE) -> list[dict]:
+    """One aberration-free scene in focus reconstructed with HQS ``lam_scale`` (the data weight
+    λ·σ²; the default is ``HQSOptions().lam_scale``), other settings default."""
+    import metasensor as ms
+    from metasensor.solvers.hqs import HQSOptions
+
+    bq = _module("bench_quality")
+    cfg = ms.SystemConfig()
+    cap = ms.simulate(bq._scene(name, size), cfg, snr_db=30.0, seed=0)
+    t0 = time.perf_counter()
+    rec = ms.reconstruct(cap.views, cfg, solver_options=HQSOptions(lam_scale=lam_scale))
+    return [{"study": "photos-solver", "scene": name, "truth_px": cap.truth.shape[0],
+             "aberration_rms_waves": 0.0, "focus_offset_waves": 0.0, "lam_scale": lam_scale,
+             "image": f"ISA (lam_scale {lam_scale:g})", **bq.scores(rec.image, cap.truth),
+             "seconds": time.perf_counter() - t0}]
+
+
 def _key(row: dict) -> tuple:
-    return (row["study"], row["scene"], row["aberration_rms_waves"], row["focus_offset_waves"])
+    return (row["study"], row["scene"], row["aberration_rms_waves"], row["focus_offset_waves"],
+            row.get("lam_scale"))
 
 
 def load_rows() -> list[dict]:
@@ -104,7 +128,7 @@ def _save(rows: list[dict]) -> None:
     atomic_write_text(PHOTOS_JSON, json.dumps(payload, indent=2, default=float))
 
 
-def run(studies=("aberrated", "focus")) -> list[dict]:
+def run(studies=("aberrated", "focus", "solver")) -> list[dict]:
     """Every case of ``studies`` not yet in :data:`PHOTOS_JSON` (written after each case)."""
     import torch
 
@@ -116,19 +140,57 @@ def run(studies=("aberrated", "focus")) -> list[dict]:
         plan += [("photos-aberrated", n, rms, 0.0) for rms in ABERRATIONS for n in PHOTOS]
     if "focus" in studies:
         plan += [("photos-focus", n, 0.0, off) for n in PHOTOS for off in OFFSETS]
-    for study, name, rms, off in plan:
-        if (study, name, rms, off) in done:
+    if "solver" in studies:
+        plan += [("photos-solver", n, 0.0, 0.0, lam) for lam in LAM_SCALES
+                 for n in SOLVER_SCENES]
+    for study, name, rms, off, *lam in plan:
+        if (study, name, rms, off, *(lam or [None])) in done:
             continue
-        new = (aberrated_case(name, rms) if study == "photos-aberrated"
-               else focus_case(name, off))
+        if study == "photos-solver":
+            new = solver_case(name, lam[0])
+        else:
+            new = (aberrated_case(name, rms) if study == "photos-aberrated"
+                   else focus_case(name, off))
         rows += new
         _save(rows)
         print(json.dumps(new[0], default=float), flush=True)
+    plot(rows, HERE / "results" / "quality_photos.png")
     return rows + targets(rows)
 
 
+def plot(rows: list[dict], path: Path) -> None:
+    """SSIM and resolved frequency per photograph: aberrated (ISA, 2D, 2D+prior) and focus."""
+    from metasensor.io.figures import new_figure, save_figure
+
+    fig, axes = new_figure(nrows=2, ncols=3, size=(14, 7))
+    for col, rms in enumerate(ABERRATIONS):
+        for row, metric in enumerate(("ssim", "resolved")):
+            ax = axes[row, col]
+            for k, kind in enumerate(("ISA", "2D sensor", "2D+prior (true PSF)")):
+                sel = [_find(rows, "photos-aberrated", n, rms, 0.0, kind) for n in PHOTOS]
+                xs = [i + 0.2 * (k - 1) for i, r in enumerate(sel) if r]
+                ax.plot(xs, [r[metric] for r in sel if r], "o", label=kind)
+            ax.set_xticks(range(len(PHOTOS)), PHOTOS, rotation=30, fontsize=7)
+            ax.set_ylabel(metric if metric == "ssim" else "resolved [cycles/px]")
+            ax.set_title(f"{rms:g} λ r.m.s., wave DAO, 30 dB", fontsize=9)
+            ax.legend(fontsize=6)
+    for row, metric in enumerate(("ssim", "resolved")):
+        ax = axes[row, 2]
+        for off in OFFSETS:
+            sel = [_find(rows, "photos-focus", n, 0.0, off, "ISA") for n in PHOTOS]
+            ax.plot([i for i, r in enumerate(sel) if r], [r[metric] for r in sel if r], "s",
+                    label=f"ISA, {off:g} λ off focus")
+        sel = [_find(rows, "photos-focus", n, 0.0, 0.0, "2D sensor") for n in PHOTOS]
+        ax.plot([i for i, r in enumerate(sel) if r], [r[metric] for r in sel if r], "x",
+                label="2D sensor, in focus")
+        ax.set_xticks(range(len(PHOTOS)), PHOTOS, rotation=30, fontsize=7)
+        ax.set_title("aberration-free, 30 dB", fontsize=9)
+        ax.legend(fontsize=6)
+    save_figure(fig, path, dpi=110)
+
+
 def _find(rows, study, scene, rms, off, prefix):
-    return next((r for r in rows if _key(r) == (study, scene, rms, off)
+    return next((r for r in rows if _key(r)[:4] == (study, scene, rms, off)
                  and r["image"].startswith(prefix)), None)
 
 
@@ -159,4 +221,18 @@ def targets(rows: list[dict]) -> list[dict]:
                     "ssim_in_focus": on["ssim"], "ssim_off": off["ssim"],
                     "resolved_in_focus": on["resolved"], "resolved_off": off["resolved"],
                     "holds": bool(off["ssim"] >= on["ssim"] and off["resolved"] >= on["resolved"])})
+    base = {r["scene"]: r for r in rows if r["study"] == "photos-solver"
+            and r["lam_scale"] == LAM_SCALES[1]}
+    for lam in LAM_SCALES[::2]:
+        mine = {r["scene"]: r for r in rows if r["study"] == "photos-solver"
+                and r["lam_scale"] == lam}
+        common = [n for n in SOLVER_SCENES if n in mine and n in base]
+        if len(common) < len(SOLVER_SCENES):
+            continue
+        gain = {n: mine[n]["ssim"] - base[n]["ssim"] for n in common}
+        res = {n: mine[n]["resolved"] - base[n]["resolved"] for n in common}
+        out.append({"summary": f"lam_scale {lam:g} against the default {LAM_SCALES[1]:g}",
+                    "ssim_gain": gain, "resolved_gain": res,
+                    "improves_photos_keeps_chart": bool(
+                        all(gain[n] > 0 for n in PHOTOS) and gain["chart"] >= -0.005)})
     return out
