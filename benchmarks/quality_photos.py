@@ -139,7 +139,7 @@ def run(studies=("aberrated", "focus", "solver")) -> list[dict]:
     if "aberrated" in studies:
         plan += [("photos-aberrated", n, rms, 0.0) for rms in ABERRATIONS for n in PHOTOS]
     if "focus" in studies:
-        plan += [("photos-focus", n, 0.0, off) for n in PHOTOS for off in OFFSETS]
+        plan += [("photos-focus", n, 0.0, off) for off in OFFSETS[::-1] for n in PHOTOS]
     if "solver" in studies:
         plan += [("photos-solver", n, 0.0, 0.0, lam) for lam in LAM_SCALES
                  for n in SOLVER_SCENES]
