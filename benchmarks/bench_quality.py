@@ -17,7 +17,7 @@ Studies (the ``study`` column):
   astronaut, coffee, chelsea, rocket, grass; 256 px fields, 240 px of truth). Next to the 2D
   sensor, the 2D sensor restored with the same kind of prior as ISA's default (``2d+prior``:
   hyper-Laplacian deconvolution by its own widefield PSF, Krishnan & Fergus, lam chosen from
-  2e3 / 1e4 / 5e4 by the truth, i.e. the best it can do): like with like.
+  100 / 400 / 2e3 / 1e4 / 5e4 by the truth, i.e. the best it can do): like with like.
 - ``focus``: a deliberate focus offset of the meta-imaging sensor (``simulate(focus_offset=)``:
   Noll Z4 = 0, 0.25, 0.5, 1 λ r.m.s. on the views only), known to the reconstruction (its
   PSF bank has the same defocus: ``zernike=cap.zernike``), against the 2D sensor in focus; bar
@@ -60,7 +60,7 @@ OFFSETS = (0.0, 0.25, 0.5, 1.0)
 FOCUS_SCENES = ("bars", "camera")
 ABERRATED_SCENES = ("chart", "camera")
 ABERRATIONS = (1.0, 3.0)
-HL_LAMBDAS = (2e3, 1e4, 5e4)
+HL_LAMBDAS = (100.0, 400.0, 2e3, 1e4, 5e4)  # KF data weights; 400 was best on the camera
 ABERRATED_JSON = HERE / "results" / "quality_aberrated.json"
 
 
