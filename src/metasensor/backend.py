@@ -34,12 +34,28 @@ def to_numpy(tensor: torch.Tensor) -> np.ndarray:
     return tensor.detach().cpu().numpy()
 
 
-def check_memory(nbytes: float, what: str) -> None:
-    """Raise MemoryError (one line, naming ``what``) before an allocation of ``nbytes`` that the
-    machine's available memory (psutil) cannot hold, instead of swapping for minutes first."""
+def memory_room() -> int:
+    """Bytes a new allocation can take: the machine's available memory (psutil), or less where
+    the process's address-space limit (``RLIMIT_AS``, e.g. ``ulimit -v``) leaves less room."""
     import psutil
 
-    avail = psutil.virtual_memory().available
+    avail = int(psutil.virtual_memory().available)
+    try:
+        import resource
+
+        soft, _ = resource.getrlimit(resource.RLIMIT_AS)
+        if soft != resource.RLIM_INFINITY:
+            avail = min(avail, max(0, soft - psutil.Process().memory_info().vms))
+    except (ImportError, OSError):  # pragma: no cover - no resource module (Windows)
+        pass
+    return avail
+
+
+def check_memory(nbytes: float, what: str) -> None:
+    """Raise MemoryError (one line, naming ``what``) before an allocation of ``nbytes`` that the
+    memory left to the process (:func:`memory_room`) cannot hold, instead of swapping for
+    minutes first."""
+    avail = memory_room()
     if nbytes > avail:
         raise MemoryError(f"{what} needs ~{nbytes / 2**30:.1f} GiB, more than the "
                           f"{avail / 2**30:.1f} GiB of memory available")

@@ -83,6 +83,10 @@ def pupil_samples(cfg: SystemConfig, plan: FieldPlan, zernike=None, depth: float
     Returns ``(a, w, norm)``: amplitude (edge cells area-weighted), wavefront in waves (0
     outside the pupil) and the energy ``sum A0²`` of the clear reference pupil.
     """
+    from metasensor.backend import check_memory
+
+    check_memory(64.0 * plan.pupil_n**2, f"the pupil grid ({plan.pupil_n}² samples of a pupil "
+                 f"{plan.radius:.0f} samples in radius; about 8 float64 arrays)")
     rx, ry = pupil_grid(plan.pupil_n, plan.radius)
     step = 1.0 / plan.radius
     a = pupil_amplitude(cfg, rx, ry, step, amplitude)

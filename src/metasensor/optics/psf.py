@@ -266,11 +266,13 @@ def view_psfs(cfg: SystemConfig, zernike=None, depth: float = 0.0, *,
     k_min = size or 2 * int(reach * grid) + 1
     check_memory(4.0 * cfg.nnum**2 * (k_min * sub) ** 2, f"the PSF bank ({cfg.nnum}² views of "
                  f">= {k_min}² px: rays reach {reach:.0f} px, max |∇W| {gmax:.0f} waves/radius)")
+    _check_field_grid(cfg, *_grid(cfg, math.ceil(k_min / grid) | 1, os_), os_)  # at least
     if size is None:
         size = _default_size(cfg, z, depth, phase, amplitude, gmax, dev)
         if points is not None:
             size = math.ceil(size * grid - 1e-9) | 1
     lenslets, n = _grid(cfg, math.ceil(size / grid) | 1, os_)
+    _check_field_grid(cfg, lenslets, n, os_)
     plan = plan_field(cfg, n, dx, gmax)
     a, w, norm = pupil_samples(cfg, plan, z, depth, phase, amplitude)
     u0 = point_field(cfg, plan, a, w, norm, n, dx, dev)
@@ -310,10 +312,21 @@ def _grid(cfg: SystemConfig, size: int, os_: int) -> tuple[int, int]:
     nnum = cfg.nnum
     dx = cfg.pixel_pitch / os_
     lenslets = 2 * ((size // 2 + nnum // 2) // nnum + 1) + 1
-    while lenslets * nnum * os_ < cfg.mla_focal * cfg.wavelength / dx**2:
-        lenslets += 2  # angular-spectrum sampling condition z <= N dx² / λ
+    need = cfg.mla_focal * cfg.wavelength / dx**2  # angular-spectrum sampling: z <= N dx² / λ
+    if lenslets * nnum * os_ < need:  # the smallest odd count that meets it
+        lenslets += 2 * max(0, math.ceil((need / (nnum * os_) - lenslets) / 2) - 1)
+        while lenslets * nnum * os_ < need:
+            lenslets += 2
     lenslets = next_fast_odd(lenslets)  # 11-smooth: fast FFT sizes
     return lenslets, lenslets * nnum * os_
+
+
+def _check_field_grid(cfg: SystemConfig, lenslets: int, n: int, os_: int) -> None:
+    """MemoryError (one line) when the ``n × n`` field grid and the arrays of its size (field,
+    transfer function, lenslet phase, a batch) would not fit."""
+    check_memory(8.0 * 6 * n**2, f"the field grid ({n}² samples: {lenslets} lenslets of "
+                 f"{cfg.nnum * os_} samples, for mla_focal·λ/dx² = "
+                 f"{cfg.mla_focal * cfg.wavelength / (cfg.pixel_pitch / os_) ** 2:.3g})")
 
 
 def _batch_size(n: int, npos: int, dev: torch.device) -> int:
