@@ -179,14 +179,30 @@ def _check_series(tif, path: Path, decoded: bool) -> None:
                             f"the {available_memory() / 2**30:.1f} GiB of memory available")
 
 
+def _check_uniform(tif, pages: list, path: Path) -> None:
+    """A series spanning every page is read from page 0's layout: each page's own header must
+    agree with it (a damaged one would be read as if it did; tifffile: "incompatible
+    keyframe")."""
+    if len(pages) < 2 or not tif.series:
+        return
+    series, first = tif.series[0], pages[0]
+    if math.prod(series.shape) != len(pages) * math.prod(first.shape):
+        return  # the series is not the pages (thumbnails, sub-series): nothing to compare
+    for k, page in enumerate(pages[1:], 1):
+        if page.shape != first.shape or page.dtype != first.dtype:
+            raise truncated(path, f"page {k} is {page.dtype} {page.shape}, unlike page 0 "
+                                  f"({first.dtype} {first.shape})")
+
+
 def read_tiff(path: Path | str, *, mmap: bool = False) -> np.ndarray:
     """The first series of a TIFF as an array (what ``tifffile.imread`` returns), after
     :func:`checked_pages`; ``mmap`` maps uncompressed data instead of reading it. A truncated or
     corrupt file is ``TiffReadError("<path>: truncated or corrupt TIFF (...)")``."""
     path = Path(path)
-    tif, _ = open_tiff(path)
+    tif, pages = open_tiff(path)
     try:
         _check_series(tif, path, decoded=not mmap)
+        _check_uniform(tif, pages, path)
         with TiffWarnings() as warned:
             arr = tif.asarray(out="memmap") if mmap else tif.asarray()
     except TiffReadError:

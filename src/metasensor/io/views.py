@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 from pathlib import Path
 
 import numpy as np
@@ -48,6 +49,15 @@ def _check_views(views: np.ndarray, cfg=None, extra=None) -> np.ndarray:
         raise TypeError(f"cfg must be a SystemConfig or None, got {type(cfg).__name__}")
     if extra is not None and not isinstance(extra, dict):
         raise TypeError(f"extra must be a dict or None, got {type(extra).__name__}")
+    if extra:
+        bad = [k for k in extra if not isinstance(k, str)]
+        if bad:
+            raise TypeError(f"extra's keys must be strings, got {bad[0]!r}")
+        try:
+            json.dumps(extra, allow_nan=False)
+        except (TypeError, ValueError) as exc:  # stored as JSON in the file's description
+            raise TypeError(f"extra must hold JSON values (numbers, strings, lists, dicts): "
+                            f"{exc}") from None
     return views
 
 
@@ -57,6 +67,8 @@ def write_views(path: str | Path, views: np.ndarray, cfg: SystemConfig | None = 
     ``.ome.zarr`` (OME-NGFF, :mod:`metasensor.io.omezarr`) atomically."""
     import tifffile
 
+    if not isinstance(path, str | os.PathLike):
+        raise TypeError(f"path must be a str or Path, got {type(path).__name__}")
     views = _check_views(views, cfg, extra)
     path = Path(path)
     meta = description(cfg, **{"kind": "views", "view_shape": list(views.shape),
