@@ -21,31 +21,29 @@ from pathlib import Path
 
 import numpy as np
 
+from metasensor.scenarios.report import ScenarioSettings
+
 __all__ = ["GigapixelSettings", "run_gigapixel"]
 
 
 @dataclass(frozen=True)
-class GigapixelSettings:
-    """tile : sensor side of one capture (pixels); grid : (rows, columns) of positions;
-    overlap : nominal overlap of the reconstructed tiles (pixels); jitter : largest sensor
-    positioning error (pixels, per axis); field_px : the lens's field over the mosaic in
+class GigapixelSettings(ScenarioSettings):
+    """:class:`~metasensor.scenarios.report.ScenarioSettings` (``blocks``: per tile; ``seed``:
+    positions and noise) and tile : sensor side of one capture (pixels); grid : (rows, columns)
+    of positions; overlap : nominal overlap of the reconstructed tiles (pixels); jitter : largest
+    sensor positioning error (pixels, per axis); field_px : the lens's field over the mosaic in
     prototype-sensor pixels (stretches the aberrations of a whole field over a small mosaic, as
-    the demo); blocks : multisite grid per tile; chunk : output chunk side; scheduler : Dask
-    scheduler (None: local threads; an address: a cluster); iterations : ISA
-    Richardson-Lucy iterations (None: the library's default solver); seed : positions and noise."""
+    the demo); chunk : output chunk side; scheduler : Dask scheduler (None: local threads; an
+    address: a cluster); scene : the built-in natural image."""
 
     tile: int = 162
     grid: tuple[int, int] = (2, 2)
     overlap: int = 40
     jitter: float = 1.5
     field_px: int = 6004
-    blocks: tuple[int, int] = (2, 2)
-    snr_db: float = 30.0
     chunk: int = 128
     scheduler: str | None = None
     scene: str = "astronaut"
-    iterations: int | None = 6  # Richardson-Lucy (fast); None: the library default (HQS)
-    seed: int = 0
 
     def __post_init__(self) -> None:
         if not (isinstance(self.tile, int) and self.tile >= 96):

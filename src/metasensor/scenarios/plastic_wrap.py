@@ -21,26 +21,24 @@ from pathlib import Path
 
 import numpy as np
 
+from metasensor.scenarios.report import ScenarioSettings
 from metasensor.scenarios.screens import PlasticWrap
 
 __all__ = ["PlasticWrapSettings", "run_plastic_wrap", "near_object_scene"]
 
 
 @dataclass(frozen=True)
-class PlasticWrapSettings:
-    """size : scene side (pixels); blocks : multisite grid (simulation and DAO); grid : regions
-    of the resolution maps; snr_db : SNR of the captures; near_depth : image-side defocus of the
-    near object (metres); wrap : the sheets; iterations : ISA Richardson-Lucy iterations (None:
-    the library's default solver); seed : noise."""
+class PlasticWrapSettings(ScenarioSettings):
+    """:class:`~metasensor.scenarios.report.ScenarioSettings` (``blocks``: simulation and DAO,
+    default 4 x 4; ``iterations``: after DAO) and size : scene side (pixels); grid : regions of
+    the resolution maps; near_depth : image-side defocus of the near object (metres); wrap :
+    the sheets."""
 
     size: int = 240
     blocks: tuple[int, int] = (4, 4)
     grid: tuple[int, int] = (4, 4)
-    snr_db: float = 30.0
     near_depth: float = 1.0e-3
     wrap: PlasticWrap = field(default_factory=lambda: PlasticWrap(rms_waves=2.0))
-    iterations: int | None = 6  # Richardson-Lucy after DAO; None: the library default (HQS)
-    seed: int = 0
 
     def __post_init__(self) -> None:
         if not (isinstance(self.size, int) and self.size >= 96):

@@ -15,7 +15,20 @@ import numpy as np
 
 from metasensor.io.atomic import atomic_write_text
 
-__all__ = ["write_report", "to_jsonable", "save_maps", "ScenarioRun", "scenario_run"]
+__all__ = ["write_report", "to_jsonable", "save_maps", "ScenarioRun", "scenario_run",
+           "ScenarioSettings"]
+
+
+@dataclass(frozen=True)
+class ScenarioSettings:
+    """The settings every scenario has (each scenario's settings extend them): blocks :
+    multisite grid; snr_db : SNR of the captures (dB); iterations : ISA Richardson–Lucy
+    iterations (None: the library's default solver); seed : noise (and the scenario's draws)."""
+
+    blocks: tuple[int, int] = (2, 2)
+    snr_db: float = 30.0
+    iterations: int | None = 6  # Richardson–Lucy (fast); None: the library default (HQS)
+    seed: int = 0
 
 
 @dataclass(frozen=True)

@@ -27,25 +27,22 @@ from pathlib import Path
 
 import numpy as np
 
+from metasensor.scenarios.report import ScenarioSettings
+
 __all__ = ["TelescopeSettings", "run_telescope"]
 
 
 @dataclass(frozen=True)
-class TelescopeSettings:
-    """size : scene side (pixels); obstruction : central obstruction ratio; d_over_r0 : total
-    D / r0; blocks : multisite grid; periods : scan periods simulated; stride : frames between
-    kymograph windows; snr_db : SNR; iterations : ISA Richardson-Lucy iterations (None: the
-    library's default solver); seed : turbulence and noise."""
+class TelescopeSettings(ScenarioSettings):
+    """:class:`~metasensor.scenarios.report.ScenarioSettings` (``seed``: turbulence and noise)
+    and size : scene side (pixels); obstruction : central obstruction ratio; d_over_r0 : total
+    D / r0; periods : scan periods simulated; stride : frames between kymograph windows."""
 
     size: int = 180
     obstruction: float = 0.35
     d_over_r0: float = 5.0
-    blocks: tuple[int, int] = (2, 2)
     periods: int = 2
     stride: int = 5
-    snr_db: float = 30.0
-    iterations: int | None = 6  # Richardson-Lucy; None: the library default (HQS)
-    seed: int = 0
 
     def __post_init__(self) -> None:
         if not (isinstance(self.size, int) and self.size >= 96):
