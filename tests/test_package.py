@@ -89,3 +89,21 @@ def test_cli_error_after_a_progress_bar_starts_its_own_line():
     assert res.returncode == 2
     lines = res.stderr.replace("\r", "\n").splitlines()
     assert "error: views hold NaN" in lines, res.stderr
+
+
+def test_a_command_failing_inside_its_progress_bar_closes_it_before_the_error(tmp_path):
+    # a real command's bar (a scenario's steps), closed by its context when the work fails
+    code = ("import sys\n"
+            "import metasensor as ms\n"
+            "import metasensor.cli as cli\n"
+            "def boom(*_, **__):\n"
+            "    raise ValueError('views hold NaN')\n"
+            "ms.simulate = boom\n"
+            f"sys.argv = ['metasensor', 'demo', '--scenario', 'telescope', '--out', "
+            f"{str(tmp_path / 'tel')!r}]\n"
+            "cli.main()\n")
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert res.returncode == 2, res.stderr
+    assert "telescope:" in res.stderr  # the bar was shown
+    lines = res.stderr.replace("\r", "\n").splitlines()
+    assert "error: views hold NaN" in lines, res.stderr
