@@ -41,9 +41,11 @@ def steps(size: int) -> list[list[str]]:
 
 def watch(args: list[str], cwd: str) -> dict:
     """Run ``metasensor ARGS`` on a pseudo-terminal (progress bars draw as they do for a
-    person) and time the silences in its output."""
+    person) and time the silences in its output. The PSF cache is the session folder's own
+    (``cwd/cache``): empty at the start, as on a first day."""
     env = {**os.environ, "PYTHONPATH": SRC + os.pathsep + os.environ.get("PYTHONPATH", ""),
-           "OMP_NUM_THREADS": "1", "PYTHONUNBUFFERED": "1"}
+           "OMP_NUM_THREADS": "1", "PYTHONUNBUFFERED": "1",
+           "METASENSOR_CACHE": str(Path(cwd) / "cache")}
     master, slave = pty.openpty()
     # a terminal of 100 x 30 characters: with no size set, progress bars draw nothing
     fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", 30, 100, 0, 0))

@@ -16,7 +16,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-__all__ = ["SegmentedMirror", "zernike_wavefront"]
+__all__ = ["SegmentedMirror", "zernike_wavefront", "comparison_sensors"]
 
 
 def zernike_wavefront(z) -> Callable[[np.ndarray, np.ndarray], np.ndarray] | None:
@@ -93,3 +93,73 @@ class SegmentedMirror:
         """R.m.s. [waves] of ``wavefront`` over the pupil (piston removed)."""
         w = np.asarray(wavefront(self.x, self.y), dtype=np.float64)[self.inside]
         return float(np.sqrt(np.mean((w - w.mean()) ** 2)))
+
+
+def _with_turbulence(w, turb):
+    """Wavefront callable ``w`` plus the turbulence phase ``turb`` (either may be None)."""
+    if turb is None:
+        return w
+    if w is None:
+        return turb
+    return lambda x, y: np.asarray(w(x, y)) + turb(x, y)
+
+
+def _on_axis(zernike, field_zernike, grid):
+    """The field-centre Noll vector the hardware AO's mirror is fitted to."""
+    from metasensor.optics.field import evaluate_field_zernike
+    from metasensor.simulation.layers import add_zernike
+
+    if field_zernike is None:
+        return zernike
+    local = evaluate_field_zernike(field_zernike if callable(field_zernike) else grid,
+                                   np.zeros(1), np.zeros(1))[0]
+    return add_zernike(zernike, local)
+
+
+def comparison_sensors(cap, reference: np.ndarray, plan, zernike, field_zernike,
+                       ao_segments: int, seeds) -> None:
+    """Fill ``cap``'s ``sensor2d`` and ``hardware_ao`` (clean and noisy) in place: the scene
+    ``reference`` through the widefield PSF of the same (aberrated) lens, and through it with
+    an ``ao_segments``² mirror fitted to the on-axis wavefront (each field block keeps W_k − D);
+    same scale, gain and noise model as the views (``seeds[1]``, ``seeds[2]``).
+
+    ``plan``: :class:`metasensor.simulation.sampling.RenderPlan` of the capture."""
+    import torch
+
+    from metasensor.simulation.noise import apply_noise
+    from metasensor.simulation.render import Lattice
+    from metasensor.simulation.sampling import accumulate
+    from metasensor.simulation.turbulence import screen_phase
+
+    banks, comps, dev = plan.banks, plan.comps, plan.banks.device
+    ly, lx = cap.truth.shape
+    rows, cols = Lattice(cap.offset, 1, ly), Lattice(cap.offset, 1, lx)
+    screen = None if plan.screens is None else plan.screens[int(round(plan.tref))]
+    turb = None if screen is None else screen_phase(screen)
+    out = torch.zeros((1, ly, lx), dtype=torch.float32, device=dev)
+    accumulate(reference, comps, lambda cp: banks.widefield(cp.zernike, cp.depth, turb, "t"),
+               rows, cols, out, dev)
+    s2d = out[0].cpu().numpy() * np.float32(cap.scale)
+    mirror = SegmentedMirror(ao_segments, cap.config.obstruction)
+    w_axis = _with_turbulence(zernike_wavefront(_on_axis(zernike, field_zernike, plan.grid)),
+                              turb)
+    if w_axis is None:
+        ao = s2d.copy()
+        cap.ao_residual_rms = 0.0
+    else:
+        fitted = mirror.correction(w_axis)
+        residuals = {}
+
+        def ao_kernel(cp):
+            w_k = _with_turbulence(zernike_wavefront(cp.zernike), turb) or (lambda x, y: 0.0 * x)
+            if cp.block not in residuals:
+                residuals[cp.block] = lambda x, y, w=w_k: np.asarray(w(x, y)) - fitted(x, y)
+            return banks.widefield(None, cp.depth, residuals[cp.block], ("ao", cp.block))
+
+        out.zero_()
+        accumulate(reference, comps, ao_kernel, rows, cols, out, dev)
+        ao = out[0].cpu().numpy() * np.float32(cap.scale)
+        cap.ao_residual_rms = mirror.rms(lambda x, y: np.asarray(w_axis(x, y)) - fitted(x, y))
+    cap.sensor2d_clean, cap.hardware_ao_clean = s2d, ao
+    cap.sensor2d = apply_noise(s2d, cap.noise, np.random.default_rng(seeds[1]))
+    cap.hardware_ao = apply_noise(ao, cap.noise, np.random.default_rng(seeds[2]))
