@@ -19,6 +19,11 @@ def test_reconstruct_with_dao_reports_each_blocks_wavefront(capsys):
                    dao=DaoOptions(max_iter=2))
     err = capsys.readouterr().err
     assert "DAO (wave)" in err and "λ r.m.s." in err
+    # within an update: what it is doing, at the granularity of a chunk of views
+    assert "update 1: PSF bank of the current wavefront" in err
+    assert "update 1: image from the views, round 1/3, 16/" in err
+    assert "update 1: view shifts and the wavefront fit" in err
+    assert "update 2: ISA image, iteration 1/5; wavefront" in err  # below 0.5 λ: the ISA
     line = next(ln for ln in err.replace("\r", "\n").splitlines() if ln.startswith("block (0, 0)"))
     assert "wavefront" in line and "DAO update(s)" in line
 

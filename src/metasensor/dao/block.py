@@ -155,12 +155,13 @@ class DaoBlock:
         t = self.known
         return ((frac - t) / (1.0 - t)).clamp(0.0, 1.0) ** 2
 
-    def estimate(self, shifts_px: torch.Tensor) -> torch.Tensor:
+    def estimate(self, shifts_px: torch.Tensor, tick=None) -> torch.Tensor:
         """I = Σ_uv e_uv Deconv(V_uv(p + s_uv), Ĥ_uv) / Σ e_uv on the pixel grid (H, W): the
         paper's estimate (``run_dao(estimator="views")``), each view up-sampled and deconvolved
         by Krishnan–Fergus (:func:`~metasensor.solvers.krishnan_fergus.kf_deconv`, λ = ``lam``,
         the authors' β schedule) after translating it by ``-shifts_px`` (B, 2) pixels; not
-        weighted by the known region (``docs/decisions.md``)."""
+        weighted by the known region (``docs/decisions.md``). ``tick(done, total)``: called
+        after every chunk of views."""
         p = self.pad
         hh, ww = self.hw
         acc = torch.zeros((hh, ww), device=self.views.device, dtype=self.views.dtype)
@@ -172,19 +173,29 @@ class DaoBlock:
             x = kf_deconv(y, self._otf_chunk(b), lam=self.lam,
                           betas=self.betas)[:, p:p + hh, p:p + ww]
             acc += (x * self.energy[b, None, None]).sum(0)
+            if tick is not None:
+                tick(min(a + self.chunk, self.views.shape[0]), self.views.shape[0])
         # each deconvolved view estimates I (kernels have unit sum, views carry e_uv·I)
         return (acc / self.energy.sum()).clamp(min=0)
 
-    def estimate_isa(self, iterations: int = 5, subsets: int = 16) -> torch.Tensor:
+    def estimate_isa(self, iterations: int = 5, subsets: int = 16, tick=None) -> torch.Tensor:
         """I = the block's ISA: phase-space Richardson–Lucy
         (:func:`~metasensor.solvers.richardson_lucy.richardson_lucy`, the authors' spiral view
         order) of all used views on :attr:`op`, on the window's pixel grid (H, W) at the scale
         of :meth:`estimate`. Not in the paper (its intermediate image is :meth:`estimate`); no
-        shifts are applied (``run_dao`` measures once per update with it)."""
+        shifts are applied (``run_dao`` measures once per update with it). ``tick(done,
+        total)``: called after every iteration."""
         g = self.op.geometry
         data, mask = g.embed(self.views[self.order] / self.scale)
         options = RLOptions(iterations=iterations, subsets=subsets)
-        result = richardson_lucy(self.op, data, mask, options)
+        done = []
+
+        def step(n: int) -> None:
+            done.append(n)
+            if tick is not None:
+                tick(len(done), iterations)
+
+        result = richardson_lucy(self.op, data, mask, options, progress=step)
         return g.crop(result.estimate).to(self.views.dtype)
 
     def predict(self, image: torch.Tensor) -> torch.Tensor:

@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
+from typing import Any
 
 import numpy as np
 import torch
@@ -234,6 +235,14 @@ class _Run:
     estimates: list = field(default_factory=list)
     shifts: np.ndarray | None = None
     image: torch.Tensor | None = None
+    say: Any = None  # callable(str): what the update is doing (the progress bar's postfix)
+
+    def tell(self, text: str) -> None:
+        """Say what the update is doing (and the wavefront so far) on the progress bar."""
+        if self.say is not None:
+            so_far = (f"; wavefront {zernike_rms(self.phi, self.opts.modes):.3f} λ r.m.s."
+                      if self.history else "")
+            self.say(f"update {len(self.history) + 1}: {text}{so_far}")
 
     def size(self, phi) -> int | None:
         size = self.opts.psf_size
@@ -254,18 +263,26 @@ def _image(run: _Run) -> torch.Tensor:
     blk, opts = run.blk, run.opts
     last = run.history[-1] if run.history else math.inf  # inf <= isa_below only for inf
     if opts.estimator == "isa" and last <= opts.isa_below:
-        return blk.estimate_isa()
+        return blk.estimate_isa(tick=lambda i, n: run.tell(f"ISA image, iteration {i}/{n}"))
     s = torch.zeros((blk.views.shape[0], 2), device=blk.views.device, dtype=torch.float64)
-    for _ in range(opts.inner - 1):
-        s = blk.measure(blk.estimate(s.to(blk.views.dtype)), opts.max_shift_px)
-    return blk.estimate(s.to(blk.views.dtype))
+    for r in range(opts.inner):
+        def tick(i, n, r=r):
+            run.tell(f"image from the views, round {r + 1}/{opts.inner}, {i}/{n} views")
+
+        image = blk.estimate(s.to(blk.views.dtype), tick)
+        if r + 1 < opts.inner:
+            run.tell(f"view shifts, round {r + 1}/{opts.inner}")
+            s = blk.measure(image, opts.max_shift_px)
+    return image
 
 
 def _update(run: _Run) -> None:
     """Steps 1-4: one phase update."""
     n, opts, used = run.cfg.nnum, run.opts, run.used
+    run.tell("PSF bank of the current wavefront")
     run.blk.set_psfs(run.bank())
     run.image = _image(run)
+    run.tell("view shifts and the wavefront fit")
     s, prec = run.blk.measure(run.image, opts.max_shift_px, precision=True)
     s_full = np.full((n, n, 2), np.nan)
     s_full[used] = to_numpy(s)
@@ -336,6 +353,7 @@ def run_dao(block_views, cfg: SystemConfig, options: DaoOptions | None = None, *
 
     with tqdm(total=opts.max_iter, desc=f"DAO ({opts.method})", disable=not opts.progress,
               leave=False) as bar:
+        run.say = lambda text: bar.set_postfix_str(text, refresh=True)
         for _ in range(opts.max_iter):
             _update(run)
             bar.set_postfix_str(f"update {run.history[-1]:.3f} λ, wavefront "

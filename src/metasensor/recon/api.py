@@ -31,11 +31,12 @@ import numpy as np
 from metasensor.config import SystemConfig
 from metasensor.recon.block import BlockResult, BlockTask, reconstruct_block
 from metasensor.recon.blocks import Block, Stitcher, block_zernikes, split_blocks
+from metasensor.recon.dao_choice import DAO_CHOICES, choose_dao
 from metasensor.recon.options import ReconOptions
 
 __all__ = ["reconstruct", "Reconstruction", "ReconOptions"]
 
-_METHODS = ("isa", "wave", "geometric")
+_METHODS = DAO_CHOICES
 
 
 @dataclass
@@ -60,6 +61,11 @@ class Reconstruction:
     registration_zernike : numpy.ndarray or None
         ``(by, bx, 21)`` the wavefront (waves, Noll) the registered shifts amount to.
     views_used : int
+    dao_applied : list
+        ``[by][bx]`` -> whether the block's DAO estimate was applied (False: negligible, the
+        block kept its starting bank; None: no DAO).
+    dao_zernike : numpy.ndarray or None
+        ``(by, bx, J)`` DAO's estimate per block, applied or not (waves; None: no DAO).
     """
 
     image: Any
@@ -76,6 +82,8 @@ class Reconstruction:
     registration: list = field(default_factory=list)
     registration_zernike: np.ndarray | None = None
     views_used: int = 0
+    dao_applied: list = field(default_factory=list)
+    dao_zernike: np.ndarray | None = None
 
     def __repr__(self) -> str:  # the arrays by shape and dtype, not their values
         from metasensor.summary import short_repr
@@ -130,16 +138,28 @@ def _check_call(cfg, method: str, zernike, field_zernike, opts: ReconOptions) ->
         raise TypeError(f"cfg must be a SystemConfig, got {type(cfg).__name__}")
     if method not in _METHODS:
         raise ValueError(f"method must be one of {_METHODS}, got {method!r}")
-    if opts.psf is not None and method != "isa":
+    if opts.psf is not None and method in ("wave", "geometric"):
         raise ValueError(f"method={method!r} builds each block's bank from its DAO estimate; a "
                          "given psf would be used unchanged: pass psf_fn, or method='isa'")
-    if opts.space_variant and (method != "isa" or opts.psf is not None):
+    if opts.space_variant and (method in ("wave", "geometric") or opts.psf is not None):
         raise ValueError("space_variant builds banks at the blocks' corners from the aberration: "
                          "use it with method='isa' and no psf")
     if opts.psf is not None and (field_zernike is not None or (
             zernike is not None and np.any(np.asarray(zernike, dtype=float)))):
         raise ValueError("psf is a complete PSF bank, so zernike/field_zernike would be ignored: "
                          "give the aberration or the bank, not both")
+
+
+def _resolve_method(method: str, zernike, field_zernike, opts: ReconOptions
+                    ) -> tuple[str, ReconOptions]:
+    """``"auto"``/``"none"`` resolved (:func:`metasensor.recon.dao_choice.choose_dao`) to the
+    method run, and ``dao_negligible`` set from the choice unless given."""
+    given = field_zernike is not None or (
+        zernike is not None and bool(np.any(np.asarray(zernike, dtype=float))))
+    choice = choose_dao(method, aberration_given=given, bank_given=opts.psf is not None)
+    if opts.dao_negligible is None:
+        opts = ReconOptions.resolve(opts, {"dao_negligible": choice.negligible})
+    return choice.method, opts
 
 
 def _block_grid(blocks) -> tuple[int, int]:
@@ -180,6 +200,7 @@ def _tasks(views, cfg: SystemConfig, method: str, grid, zern, opts: ReconOptions
             block=b, cfg=cfg, views=np.asarray(views[:, :, sy, sx], np.float32) if ship else views,
             uv=plan["uv"], zernike=zern[b.index], solver=plan["solver"], dao=dao, psf=opts.psf,
             psf_fn=opts.psf_fn, register=bool(opts.register), pad=opts.pad,
+            dao_negligible=float(opts.dao_negligible or 0.0),
             device=plan["device"], windowed=ship, progress=plan["tick"] if local else None,
             corner_zernike=None if plan["corners"] is None else plan["corners"][b.index]))
     return out
@@ -194,6 +215,8 @@ class _Collector:
         self.history = [[[] for _ in range(bx)] for _ in range(by)]
         self.dao = [[[] for _ in range(bx)] for _ in range(by)]
         self.registration = [[[] for _ in range(bx)] for _ in range(by)]
+        self.applied = [[None] * bx for _ in range(by)]
+        self.dao_zernike = None
         from metasensor.dao.bank_registration import WAVEFRONT_MODES
 
         self.reg_zernike = (np.zeros((by, bx, max(WAVEFRONT_MODES)), np.float32) if register
@@ -207,6 +230,13 @@ class _Collector:
         self.history[iy][ix] = res.history
         self.dao[iy][ix] = res.dao_history
         self.registration[iy][ix] = res.registration
+        self.applied[iy][ix] = res.dao_applied
+        if res.dao_zernike is not None:
+            if self.dao_zernike is None:
+                self.dao_zernike = np.zeros_like(self.zernike)
+            self.dao_zernike[iy, ix, :] = 0
+            m = min(res.dao_zernike.size, self.zernike.shape[-1])
+            self.dao_zernike[iy, ix, :m] = res.dao_zernike[:m]
         if self.reg_zernike is not None and res.registration_zernike is not None:
             self.reg_zernike[iy, ix] = res.registration_zernike
         z = np.asarray(res.zernike, np.float32)
@@ -228,7 +258,10 @@ def reconstruct(views, cfg: SystemConfig, method: str = "isa", zernike=None, fie
         ``(nnum, nnum, Ly·scan, Lx·scan)`` view stack (NumPy or zarr), not modified.
     cfg : SystemConfig
     method : str
-        ``"isa"``, or ``"wave"``/``"geometric"`` (DAO per block first).
+        ``"isa"`` (or ``"none"``), ``"wave"``/``"geometric"`` (DAO per block first), or
+        ``"auto"`` (:mod:`metasensor.recon.dao_choice`: wave DAO unless ``zernike``,
+        ``field_zernike`` or ``psf`` is given; blocks with a negligible estimate keep the
+        aberration-free bank). ``Reconstruction.method`` is the method run.
     zernike : array_like, optional
         ``(J,)`` Noll vector (waves) of the whole field.
     field_zernike : array_like or callable, optional
@@ -246,6 +279,10 @@ def reconstruct(views, cfg: SystemConfig, method: str = "isa", zernike=None, fie
     t0 = time.perf_counter()
     opts = ReconOptions.resolve(options, settings)
     _check_call(cfg, method, zernike, field_zernike, opts)
+    method, opts = _resolve_method(method, zernike, field_zernike, opts)
+    if opts.space_variant and method != "isa":  # "auto" with nothing given estimates it
+        raise ValueError("space_variant builds banks at the blocks' corners from the given "
+                         "aberration: give zernike or field_zernike, or use method='isa'")
     views = _check_views(views, cfg)
     grid = _block_grid(blocks)
     d = cfg.scan_step_px
@@ -302,4 +339,5 @@ def _run(views, cfg, method, grid, zern, opts: ReconOptions, plan: dict) -> Reco
         blocks=plan["blocks"], method=method, config=cfg, iterations=iterations,
         subsets=plan["subsets"], seconds=time.perf_counter() - plan["t0"], solver=plan["name"],
         dao_history=collect.dao, registration=collect.registration,
-        registration_zernike=collect.reg_zernike, views_used=len(plan["uv"]))
+        registration_zernike=collect.reg_zernike, views_used=len(plan["uv"]),
+        dao_applied=collect.applied, dao_zernike=collect.dao_zernike)

@@ -42,6 +42,9 @@ class BlockTask:
         What :func:`metasensor.solvers.solve` runs.
     dao : DaoOptions or None
         DAO's settings (wave/geometric), None for plain ISA.
+    dao_negligible : float
+        Waves r.m.s. (Noll 4-45): an estimate that differs from ``zernike`` by less is not
+        applied (the block keeps ``zernike``'s bank); 0: always applied.
     """
 
     block: Block
@@ -59,12 +62,14 @@ class BlockTask:
     windowed: bool = False
     progress: Any = None  # callable(n), local runs only
     corner_zernike: np.ndarray | None = None  # (4, J): the space-variant model's field points
+    dao_negligible: float = 0.0
 
 
 @dataclass
 class BlockResult:
     """A block's region image ``(ry, rx)`` float32, its Noll vector (waves), the solver's and
-    DAO's histories, and the registration's (r.m.s. shift per round, wavefront)."""
+    DAO's histories, the registration's (r.m.s. shift per round, wavefront), and whether DAO's
+    estimate was applied (None: no DAO) and the estimate."""
 
     block: Block
     image: np.ndarray
@@ -73,6 +78,8 @@ class BlockResult:
     dao_history: list[float] = field(default_factory=list)
     registration: list[float] = field(default_factory=list)
     registration_zernike: np.ndarray | None = None
+    dao_applied: bool | None = None
+    dao_zernike: np.ndarray | None = None
 
 
 def default_psfs(cfg: SystemConfig, zernike, device, size: int | None = None) -> np.ndarray:
@@ -87,9 +94,10 @@ def default_psfs(cfg: SystemConfig, zernike, device, size: int | None = None) ->
                       dtype=np.float32)
 
 
-def _report_dao(index, zernike: np.ndarray, history: list[float], tol: float) -> None:
+def _report_dao(index, zernike: np.ndarray, history: list[float], tol: float,
+                applied: bool, negligible: float) -> None:
     """One line per block under the progress bar: the wavefront DAO estimated (waves r.m.s.
-    over Noll 4-45) and how it converged."""
+    over Noll 4-45), how it converged, and whether it was applied."""
     import sys
 
     from tqdm import tqdm
@@ -100,9 +108,24 @@ def _report_dao(index, zernike: np.ndarray, history: list[float], tol: float) ->
     last = history[-1] if history else 0.0
     note = ("negligible: no further update" if len(history) == 1 and last < tol
             else "converged" if last < tol else "not converged")
+    if not applied:
+        note += f"; under {negligible:g} λ: not applied (the block keeps its starting bank)"
     tqdm.write(f"block {tuple(int(i) for i in index)}: wavefront {rms:.3f} λ r.m.s. (Noll "
                f"4-45), {len(history)} DAO update(s), last {last:.3f} λ: {note}",
                file=sys.stderr)
+
+
+def _negligible(estimate: np.ndarray, start: np.ndarray, threshold: float) -> bool:
+    """Whether ``estimate`` differs from ``start`` by less than ``threshold`` waves r.m.s.
+    (Noll 4-45)."""
+    from metasensor.dao.wavefront import zernike_rms
+
+    if threshold <= 0:
+        return False
+    diff = np.zeros(max(estimate.size, start.size), np.float64)
+    diff[:estimate.size] += estimate
+    diff[:start.size] -= start
+    return zernike_rms(diff) < threshold
 
 
 def _window(task: BlockTask) -> np.ndarray:
@@ -116,28 +139,55 @@ def _window(task: BlockTask) -> np.ndarray:
     return window
 
 
-def _bank(task: BlockTask, window: np.ndarray) -> tuple[np.ndarray, np.ndarray, list[float]]:
-    """The block's bank ``(nnum, nnum, K, K)``, Noll vector and DAO history."""
+def _probe(task: BlockTask, window: np.ndarray, dao, init):
+    """With ``dao_negligible``: one DAO update on the block's ISA image (cheap: no per-view
+    deconvolution), returned when its estimate is negligible, else None (the full estimate
+    runs, from the start again: far from the truth the ISA image absorbs part of the error)."""
+    if task.dao_negligible <= 0:
+        return None
+    import math
+
+    from metasensor.dao import estimate
+
+    probe = estimate.run_dao(window, task.cfg, replace(dao, max_iter=1, isa_below=math.inf),
+                             init=init, device=task.device)
+    start = np.zeros(0) if init is None else np.asarray(init, np.float64)
+    return probe if _negligible(np.asarray(probe.zernike), start, task.dao_negligible) else None
+
+
+def _bank(task: BlockTask, window: np.ndarray
+          ) -> tuple[np.ndarray, np.ndarray, list[float], np.ndarray | None]:
+    """The block's bank ``(nnum, nnum, K, K)``, the Noll vector it was made of, DAO's history,
+    and DAO's estimate (None: no DAO; applied when it is that Noll vector)."""
     zernike = np.asarray(task.zernike, dtype=np.float32)
     if task.dao is None:
         if task.psf is not None:
-            return task.psf, zernike, []
-        return (task.psf_fn or default_psfs)(task.cfg, zernike, task.device), zernike, []
+            return task.psf, zernike, [], None
+        return (task.psf_fn or default_psfs)(task.cfg, zernike, task.device), zernike, [], None
     from metasensor.dao import banks, estimate
 
     init = zernike if np.any(zernike) else None
     shown = task.progress is not None  # a local run with a bar: show DAO's updates too
     dao = replace(task.dao, progress=True) if shown else task.dao
-    res = estimate.run_dao(window, task.cfg, dao, init=init, device=task.device)
+    res = _probe(task, window, dao, init)
+    if res is None:  # not negligible (or no probe): the full estimate
+        res = estimate.run_dao(window, task.cfg, dao, init=init, device=task.device)
     z_est = np.asarray(res.zernike, dtype=np.float32).ravel()
     merged = np.zeros(max(zernike.size, z_est.size), np.float32)
     merged[:z_est.size] = z_est
     history = [float(h) for h in res.history]
+    applied = not _negligible(merged, zernike, task.dao_negligible)
     if shown:
-        _report_dao(task.block.index, merged, history, task.dao.tol)
+        _report_dao(task.block.index, merged, history, task.dao.tol, applied,
+                    task.dao_negligible)
+    if not applied:  # the starting aberration's bank (cached), not a one-off bank of noise
+        start = np.zeros_like(merged)
+        start[:zernike.size] = zernike
+        bank = (task.psf_fn or default_psfs)(task.cfg, zernike, task.device)
+        return bank, start, history, merged
     bank = (task.psf_fn(task.cfg, merged, task.device) if task.psf_fn is not None
             else banks.block_psfs(task.cfg, res, device=task.device))
-    return bank, merged, history
+    return bank, merged, history, merged
 
 
 def _operator(task: BlockTask, psf: np.ndarray, data_win: np.ndarray):
@@ -168,18 +218,20 @@ def reconstruct_block(task: BlockTask) -> BlockResult:
                                                                cols)
         return _solve(task, op, window[rows, cols], np.asarray(task.zernike, np.float32), [],
                       registration, reg_zernike)
-    bank, zernike, dao_history = _bank(task, window)
+    bank, zernike, dao_history, estimate = _bank(task, window)
     bank = np.asarray(bank, dtype=np.float32)
     if bank.ndim != 4 or bank.shape[:2] != (cfg.nnum, cfg.nnum):
         raise ValueError(f"psf bank must have shape (nnum, nnum, K, K) with nnum = {cfg.nnum}, "
                          f"got {bank.shape}")
     op, registration, reg_zernike = _operator(task, bank[rows, cols], window[rows, cols])
-    return _solve(task, op, window[rows, cols], zernike, dao_history, registration, reg_zernike)
+    return _solve(task, op, window[rows, cols], zernike, dao_history, registration, reg_zernike,
+                  estimate)
 
 
 def _solve(task: BlockTask, op, data_win: np.ndarray, zernike, dao_history, registration,
-           reg_zernike) -> BlockResult:
-    """Solve the block on ``op`` and cut its region out of the estimate."""
+           reg_zernike, estimate=None) -> BlockResult:
+    """Solve the block on ``op`` and cut its region out of the estimate (``estimate``: DAO's,
+    applied when it is ``zernike`` itself)."""
     import torch
 
     from metasensor.solvers import solve
@@ -189,4 +241,6 @@ def _solve(task: BlockTask, op, data_win: np.ndarray, zernike, dao_history, regi
     image = op.geometry.crop(result.estimate).detach().cpu().numpy()
     ry, rx = task.block.region_in_window()
     return BlockResult(task.block, np.ascontiguousarray(image[ry, rx], dtype=np.float32),
-                       zernike, result.history, dao_history, registration, reg_zernike)
+                       zernike, result.history, dao_history, registration, reg_zernike,
+                       None if estimate is None else estimate is zernike,  # applied: the same
+                       estimate)

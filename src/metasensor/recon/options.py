@@ -60,6 +60,10 @@ class ReconOptions:
     dao : DaoOptions or None
         DAO's settings for ``method="wave"``/``"geometric"`` (its ``method`` is set from
         ``reconstruct``'s).
+    dao_negligible : float or None
+        Waves r.m.s. (Noll 4-45): a block whose DAO estimate differs from its starting
+        aberration by less keeps the bank of that aberration (None: ``method="auto"``'s
+        :data:`metasensor.recon.dao_choice.NEGLIGIBLE_RMS`, else 0: always applied).
     device : str or None
         "cpu" or "cuda" (default: CUDA when present).
     psf : numpy.ndarray or None
@@ -87,6 +91,7 @@ class ReconOptions:
     pad: bool = True
     space_variant: bool = False
     dao: DaoOptions | None = None
+    dao_negligible: float | None = None
     device: Any = None
     psf: Any = None
     psf_fn: Any = None
@@ -114,6 +119,11 @@ class ReconOptions:
             raise TypeError("dao must be DaoOptions")
         if not isinstance(self.space_variant, bool):
             raise TypeError(f"space_variant must be True or False, got {self.space_variant!r}")
+        g = self.dao_negligible
+        if g is not None and (isinstance(g, bool) or not (
+                isinstance(g, int | float | np.number) and math.isfinite(g) and g >= 0)):
+            raise ValueError(f"dao_negligible must be a non-negative number of waves (or None), "
+                             f"got {g!r}")
         if self.psf_fn is not None and not callable(self.psf_fn):
             raise TypeError("psf_fn must be callable(cfg, zernike, device)")
 

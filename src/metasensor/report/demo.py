@@ -190,15 +190,49 @@ def _check_settings(s: DemoSettings) -> None:
     split_blocks((s.size // d * d,) * 2, s.blocks, d)
 
 
+def _simulate_both(scene: np.ndarray, cfg: SystemConfig, fz_sensor, s: DemoSettings, steps):
+    """The meta-imaging sensor's capture and the plain light-field camera's (1 x 1 scan) of
+    ``scene`` through the lens's field aberration ``fz_sensor``."""
+    from metasensor.simulation.capture import simulate
+
+    steps.set_postfix_str("simulating the meta-imaging sensor")
+    cap = simulate(scene, cfg, field_zernike=fz_sensor, snr_db=s.snr_db, seed=s.seed,
+                   field_blocks=s.field_blocks)
+    steps.update()
+    steps.set_postfix_str("simulating the plain light-field camera")
+    lf = simulate(scene, cfg.replace(scan=1), field_zernike=fz_sensor, snr_db=s.snr_db,
+                  seed=s.seed + 1, comparison=False, field_blocks=s.field_blocks)
+    steps.update()
+    return cap, lf
+
+
+def _reconstruct_both(cap, lf, fz_sensor, scene_shape, s: DemoSettings, steps):
+    """Both captures reconstructed with the known field aberration (multisite blocks): the
+    meta-imaging sensor's with ``s.solver``, the plain light field's with Richardson–Lucy."""
+    import metasensor as ms
+
+    steps.set_postfix_str("reconstructing (meta-imaging, multisite)")
+    views = ms.realign(cap.frames, cap.config, cap.scan_order)
+    fz_meta = sensor_field_zernike(fz_sensor, cap.config, scene_shape, cap.truth.shape)
+    rec = ms.reconstruct(views, cap.config, field_zernike=fz_meta, blocks=s.blocks,
+                         iterations=s.iterations if s.solver == "rl" else None,
+                         solver=s.solver, register=s.solver == "hqs")
+    steps.update()
+    steps.set_postfix_str("reconstructing (plain light field)")
+    fz_lf = sensor_field_zernike(fz_sensor, lf.config, scene_shape, lf.truth.shape)
+    rec_lf = ms.reconstruct(lf.views, lf.config, field_zernike=fz_lf, blocks=s.blocks,
+                            iterations=s.iterations, solver="rl")
+    steps.update()
+    return rec, rec_lf
+
+
 def run_demo(out: str | Path, settings: DemoSettings | None = None, progress: bool = True) -> dict:
     """Run the whole demo and write the report into ``out``; returns the summary dict."""
     import warnings
 
     from tqdm.auto import tqdm
 
-    import metasensor as ms
     from metasensor.report.html import write_html_report
-    from metasensor.simulation.capture import simulate
     from metasensor.simulation.lens import SingleLens
     from metasensor.simulation.scenes import load_scene
 
@@ -216,29 +250,8 @@ def run_demo(out: str | Path, settings: DemoSettings | None = None, progress: bo
     cfg = lens.config(SystemConfig(scan=s.scan))
     scene = load_scene("chart", s.size).astype(np.float32)
     fz_sensor = lens.field_zernike(cfg, (s.field_px, s.field_px))
-
-    steps.set_postfix_str("simulating the meta-imaging sensor")
-    cap = simulate(scene, cfg, field_zernike=fz_sensor, snr_db=s.snr_db, seed=s.seed,
-                   field_blocks=s.field_blocks)
-    steps.update()
-    steps.set_postfix_str("simulating the plain light-field camera")
-    lf = simulate(scene, cfg.replace(scan=1), field_zernike=fz_sensor, snr_db=s.snr_db,
-                     seed=s.seed + 1, comparison=False, field_blocks=s.field_blocks)
-    steps.update()
-
-    steps.set_postfix_str("reconstructing (meta-imaging, multisite)")
-    views = ms.realign(cap.frames, cap.config, cap.scan_order)
-    fz_meta = sensor_field_zernike(fz_sensor, cap.config, scene.shape, cap.truth.shape)
-    rec = ms.reconstruct(views, cap.config, field_zernike=fz_meta, blocks=s.blocks,
-                         iterations=s.iterations if s.solver == "rl" else None,
-                         solver=s.solver, register=s.solver == "hqs")
-    steps.update()
-    steps.set_postfix_str("reconstructing (plain light field)")
-    fz_lf = sensor_field_zernike(fz_sensor, lf.config, scene.shape, lf.truth.shape)
-    rec_lf = ms.reconstruct(lf.views, lf.config, field_zernike=fz_lf, blocks=s.blocks,
-                            iterations=s.iterations, solver="rl")
-    steps.update()
-
+    cap, lf = _simulate_both(scene, cfg, fz_sensor, s, steps)
+    rec, rec_lf = _reconstruct_both(cap, lf, fz_sensor, scene.shape, s, steps)
     steps.set_postfix_str("measuring and writing the report")
     results = {
         "2D sensor": (cap.sensor2d, cap.truth),

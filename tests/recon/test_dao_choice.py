@@ -1,0 +1,82 @@
+"""The reconstruction's DAO default (``method="auto"``, the command line's ``--dao auto``): wave
+DAO where nothing says what the aberration is, the given aberration or bank used as is, and a
+block whose estimate is negligible keeps the aberration-free bank (the plain ISA image)."""
+
+import numpy as np
+import pytest
+
+import metasensor as ms
+from metasensor.recon.dao_choice import DAO_CHOICES, NEGLIGIBLE_RMS, choose_dao
+from metasensor.simulation.scenes import load_scene
+
+
+@pytest.mark.parametrize(("mode", "aberration", "bank", "method", "negligible"), [
+    ("auto", False, False, "wave", NEGLIGIBLE_RMS),  # nothing known: estimate it
+    ("auto", True, False, "isa", 0.0),  # a calibration / --zernike: used as is
+    ("auto", False, True, "isa", 0.0),  # a complete PSF bank: used as is
+    ("none", False, False, "isa", 0.0),  # the fast path
+    ("isa", True, False, "isa", 0.0),
+    ("wave", True, False, "wave", 0.0),  # explicit DAO: always applied, from the given start
+    ("geometric", False, False, "geometric", 0.0),
+])
+def test_choose_dao(mode, aberration, bank, method, negligible):
+    choice = choose_dao(mode, aberration_given=aberration, bank_given=bank)
+    assert (choice.method, choice.negligible) == (method, negligible)
+    assert choice.reason and "\n" not in choice.reason
+
+
+def test_choose_dao_refuses_an_unknown_mode_naming_the_choices():
+    with pytest.raises(ValueError, match="auto, none, isa, wave, geometric.*'fast'"):
+        choose_dao("fast", aberration_given=False, bank_given=False)
+    assert set(DAO_CHOICES) == {"auto", "none", "isa", "wave", "geometric"}
+
+
+def test_reconstruct_auto_keeps_the_plain_image_of_an_aberration_free_capture(capsys):
+    cap = ms.simulate(load_scene("chart", 60), ms.SystemConfig(), snr_db=30, seed=0,
+                      comparison=False)
+    plain = ms.reconstruct(cap.views, cap.config, method="none")
+    auto = ms.reconstruct(cap.views, cap.config, method="auto", progress=True)
+    assert auto.method == "wave" and auto.dao_applied == [[False]]
+    assert len(auto.dao_history[0][0]) == 1  # one probing update, no full estimate
+    assert float(np.abs(auto.dao_zernike[0, 0]).max()) < NEGLIGIBLE_RMS
+    assert not np.any(auto.zernike)  # the bank used: aberration-free
+    np.testing.assert_array_equal(auto.image, plain.image)
+    assert plain.method == "isa" and plain.dao_applied == [[None]] and plain.dao_zernike is None
+    line = next(ln for ln in capsys.readouterr().err.replace("\r", "\n").splitlines()
+                if ln.startswith("block (0, 0)"))
+    assert "not applied" in line and f"under {NEGLIGIBLE_RMS:g} λ" in line
+
+
+@pytest.mark.parametrize(("zernike", "field", "psf", "method"), [
+    (None, None, None, "wave"), ([0, 0, 0, 0], None, None, "wave"),
+    ([0, 0, 0, 0.2], None, None, "isa"), (None, np.zeros((2, 2, 4)), None, "isa"),
+    (None, None, np.ones((15, 15, 3, 3), np.float32), "isa")])
+def test_reconstruct_auto_uses_a_given_aberration_or_bank_as_is(zernike, field, psf, method):
+    from metasensor.recon.api import _resolve_method
+    from metasensor.recon.options import ReconOptions
+
+    run, opts = _resolve_method("auto", zernike, field, ReconOptions(psf=psf))
+    assert run == method
+    assert opts.dao_negligible == (NEGLIGIBLE_RMS if method == "wave" else 0.0)
+    run, opts = _resolve_method("auto", None, None, ReconOptions(dao_negligible=0.3))
+    assert (run, opts.dao_negligible) == ("wave", 0.3)  # a given threshold is kept
+
+
+def test_reconstruct_refuses_a_negative_negligible_threshold():
+    with pytest.raises(ValueError, match="dao_negligible"):
+        ms.reconstruct(np.ones((15, 15, 8, 8), np.float32), ms.SystemConfig(), method="auto",
+                       dao_negligible=-0.1)
+
+
+@pytest.mark.slow
+def test_reconstruct_auto_corrects_half_a_wave_that_plain_isa_leaves():
+    z = np.array([0, 0, 0, 0.35, 0.3, 0, 0.2])  # 0.50 λ r.m.s.
+    cap = ms.simulate(load_scene("chart", 90), ms.SystemConfig(), zernike=z, snr_db=30, seed=0,
+                      comparison=False)
+    plain = ms.reconstruct(cap.views, cap.config, method="none")
+    auto = ms.reconstruct(cap.views, cap.config, method="auto")
+    before = ms.metrics.ssim(truth=cap.truth, image=plain.image)
+    after = ms.metrics.ssim(truth=cap.truth, image=auto.image)
+    assert auto.dao_applied == [[True]]
+    np.testing.assert_allclose(auto.zernike[0, 0, 3:7], z[3:7], atol=0.05)
+    assert after > before + 0.2, (before, after)
