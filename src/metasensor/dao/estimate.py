@@ -45,6 +45,7 @@ from metasensor.solvers.krishnan_fergus import DEFAULT_LAMBDA
 __all__ = ["DaoOptions", "DaoResult", "run_dao", "estimate_block_aberration", "JMAX"]
 
 JMAX = 45
+MIN_SAMPLES = 8  # view samples per side a block needs for DAO
 _METHODS = ("wave", "geometric")
 _ESTIMATORS = ("isa", "views")
 
@@ -183,7 +184,7 @@ def _check_block(block_views, cfg: SystemConfig) -> np.ndarray:
     v = np.asarray(block_views)
     if v.ndim != 4 or v.shape[:2] != (n, n):
         raise ValueError(f"block_views must have shape ({n}, {n}, h, w), got {v.shape}")
-    if min(v.shape[2:]) < 8:
+    if min(v.shape[2:]) < MIN_SAMPLES:
         raise ValueError(f"block too small for DAO: views of {v.shape[2:]} samples")
     if not np.isfinite(v).all():
         raise ValueError("block_views contain NaN or infinite values")

@@ -166,6 +166,13 @@ def _bank(task: BlockTask, window: np.ndarray
         return (task.psf_fn or default_psfs)(task.cfg, zernike, task.device), zernike, [], None
     from metasensor.dao import banks, estimate
 
+    if task.dao_negligible > 0 and min(window.shape[-2:]) < estimate.MIN_SAMPLES:
+        import warnings  # "auto": a block too small to estimate keeps its start
+
+        warnings.warn(f"blocks of {window.shape[-2]} x {window.shape[-1]} view samples are too "
+                      f"small for DAO (at least {estimate.MIN_SAMPLES}): the aberration is not "
+                      "estimated there", UserWarning, stacklevel=2)
+        return (task.psf_fn or default_psfs)(task.cfg, zernike, task.device), zernike, [], None
     init = zernike if np.any(zernike) else None
     shown = task.progress is not None  # a local run with a bar: show DAO's updates too
     dao = replace(task.dao, progress=True) if shown else task.dao

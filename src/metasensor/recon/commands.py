@@ -33,11 +33,14 @@ class ReconstructArgs:
     out: Annotated[Path, typer.Option("--out", "-o", file_okay=False, help="output folder")]
     psf: Annotated[_Path, typer.Option("--psf", help="PSF bank (HDF5, dataset 'psf')")] = None
     config: Annotated[_Path, typer.Option("--config", help="system configuration TOML")] = None
-    method: Annotated[str, typer.Option("--method", "--dao",
-                                        help="isa | wave | geometric (DAO first)")] = "isa"
+    method: Annotated[str, typer.Option(
+        "--dao", "--method", help="auto: estimate the aberration per block (wave DAO) unless "
+        "--system/--zernike/--field-zernike/--psf gives it, keeping the aberration-free bank "
+        "where the estimate is negligible | none: no estimate (fastest) | wave | geometric: "
+        "DAO in every block, always applied")] = "auto"
     system: Annotated[_Path, typer.Option(
         "--system", help="system aberration (system.h5 from calibrate-aberration): its field "
-        "map initialises DAO, or is used as is with --method isa")] = None
+        "map is used as is, or initialises DAO with --dao wave")] = None
     blocks: Annotated[str, typer.Option(help="multisite blocks, e.g. 4x4")] = "1x1"
     overlap: Annotated[int, typer.Option(help="block overlap in output pixels")] = 20
     solver: Annotated[str | None, typer.Option(
@@ -78,6 +81,11 @@ class ReconstructArgs:
                              "would be ignored; give the aberration or the bank, not both")
         if self.system is not None and self.field_zernike is not None:
             raise ValueError("give either --system or --field-zernike, not both")
+        from metasensor.recon.dao_choice import DAO_CHOICES
+
+        if self.method not in DAO_CHOICES:
+            raise ValueError(f"--dao must be one of {', '.join(DAO_CHOICES)}, got "
+                             f"{self.method!r}")
 
     def provenance(self, cfg) -> dict:
         """The inputs' checksums and the settings, for ``summary.json``."""
@@ -129,12 +137,25 @@ def _say_done(rec, written: list[Path]) -> None:
                f"{rec.seconds:.1f} s -> {', '.join(str(p) for p in written)}")
 
 
+def _say_dao(args: ReconstructArgs, inputs) -> None:
+    """One line on stderr: whether the aberration is estimated, and why."""
+    from metasensor.optics.psf_io import parse_zernike
+    from metasensor.recon.dao_choice import choose_dao
+
+    z = parse_zernike(args.zernike)
+    given = inputs.field_zernike is not None or (z is not None and bool(np.any(z)))
+    choice = choose_dao(args.method, aberration_given=given, bank_given=inputs.bank is not None)
+    typer.echo(f"aberration: {choice.reason}", err=True)
+
+
 def run_reconstruct(args: ReconstructArgs) -> None:
-    """Reconstruct the all-in-focus image from views (ISA; multisite blocks through Dask).
+    """Reconstruct the all-in-focus image from views (ISA; multisite blocks through Dask). By
+    default the aberration is estimated per block (DAO), as the paper does, unless a system
+    calibration or an aberration is given; --dao none skips the estimate.
 
-    Example: metasensor reconstruct cap/views.tif --config cfg.toml --blocks 4x4 --out result/
+    Example: metasensor reconstruct cap/views.tif --blocks 4x4 --out result/
 
-    With DAO: metasensor reconstruct views.tif --dao wave --system system.h5 --out result/
+    Known optics: metasensor reconstruct views.tif --system system.h5 --out result/
     """
     from metasensor.cli_options import parse_pair
     from metasensor.io.atomic import StagedFolder
@@ -147,6 +168,7 @@ def run_reconstruct(args: ReconstructArgs) -> None:
     inputs = read_inputs(args)
     cfg, stack = inputs.config, inputs.stack
     staged, target = _zarr_target(args, cfg, stack) if args.zarr_out else (None, None)
+    _say_dao(args, inputs)
     try:
         rec = reconstruct(stack, cfg, method=args.method, zernike=parse_zernike(args.zernike),
                           field_zernike=inputs.field_zernike,

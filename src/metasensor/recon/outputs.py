@@ -45,6 +45,9 @@ def write_outputs(out: Path, rec, views, origin=None, provenance: dict | None = 
                                         else rec.registration_zernike.tolist())}
     if rec.method in ("wave", "geometric"):  # DAO: the estimated wavefront of every block
         summary["zernike_per_block"] = np.asarray(rec.zernike).tolist()
+        summary["dao_applied"] = rec.dao_applied  # False: negligible, the start's bank kept
+        if rec.dao_zernike is not None:
+            summary["dao_zernike_per_block"] = np.asarray(rec.dao_zernike).tolist()
     if provenance is not None:
         summary["provenance"] = provenance
     atomic_write_text(out / "summary.json", json.dumps(summary, indent=1, default=str))
