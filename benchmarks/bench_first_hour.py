@@ -33,7 +33,7 @@ def steps(size: int) -> list[list[str]]:
          "--snr", "30", "-o", "cap"],
         ["calibrate", "cap/frames.tif", "-o", "calib.toml"],
         ["realign", "cap/frames.tif", "--calib", "calib.toml", "-o", "views.tif"],
-        ["reconstruct", "views.tif", "--dao", "wave", "--blocks", "2x2", "-o", "result"],
+        ["reconstruct", "views.tif", "--blocks", "2x2", "-o", "result"],  # DAO: the default
         ["depth", "views.tif", "-o", "depth"],
         ["evaluate", "result/image.tif", "--truth", "cap/truth.tif", "--chart", "-o", "eval"],
     ]

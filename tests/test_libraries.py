@@ -1,5 +1,6 @@
 """Libraries instead of hand-written code: the cache folder from platformdirs (the platform's
-user cache, METASENSOR_CACHE still first), TOML values written by tomli-w."""
+user cache, METASENSOR_CACHE still first), TOML values written by tomli-w, windows from
+scipy.signal.windows."""
 
 import sys
 import tomllib
@@ -44,3 +45,19 @@ def test_calibration_with_a_non_bmp_file_name_reads_back(tmp_path):
 def test_toml_refuses_what_it_cannot_write(value):
     with pytest.raises(ConfigError):
         toml_value(value)
+
+
+def test_tukey_window_comes_from_scipy(monkeypatch):
+    """The DAO's and registration's Tukey window is scipy.signal.windows.tukey (sampled at the
+    pixel centres), not a hand-written raised cosine."""
+    import numpy as np
+    import scipy.signal.windows as windows
+
+    from metasensor.align.shifts import tukey2d
+
+    w = tukey2d((6, 10), alpha=0.5).numpy()
+    np.testing.assert_allclose(w[:, 0:1] * w[0:1, :] / w[0, 0], w, rtol=1e-6)  # separable
+    np.testing.assert_allclose(w[3], windows.tukey(21, 0.5)[1::2] * windows.tukey(13, 0.5)[7],
+                               rtol=1e-6)
+    monkeypatch.setattr(windows, "tukey", lambda n, alpha: np.full(n, 0.5))
+    assert np.allclose(tukey2d((4, 4)).numpy(), 0.25)  # delegated: the library's values

@@ -25,6 +25,21 @@ def test_choose_dao(mode, aberration, bank, method, negligible):
     assert choice.reason and "\n" not in choice.reason
 
 
+def test_auto_without_views_to_estimate_from_says_so_and_runs_plain_isa():
+    from metasensor.dao.estimate import dao_unavailable
+    from metasensor.recon.api import _resolve_method
+    from metasensor.recon.options import ReconOptions
+
+    small = ms.SystemConfig(nnum=5, scan=5, na=0.04)  # one view inside the pupil
+    assert dao_unavailable(ms.SystemConfig()) is None
+    reason = dao_unavailable(small)
+    assert reason and "views" in reason
+    choice = choose_dao("auto", aberration_given=False, bank_given=False, unavailable=reason)
+    assert choice.method == "isa" and reason in choice.reason
+    with pytest.warns(UserWarning, match="not estimated"):
+        assert _resolve_method("auto", small, None, None, ReconOptions())[0] == "isa"
+
+
 def test_choose_dao_refuses_an_unknown_mode_naming_the_choices():
     with pytest.raises(ValueError, match="auto, none, isa, wave, geometric.*'fast'"):
         choose_dao("fast", aberration_given=False, bank_given=False)
@@ -55,10 +70,11 @@ def test_reconstruct_auto_uses_a_given_aberration_or_bank_as_is(zernike, field, 
     from metasensor.recon.api import _resolve_method
     from metasensor.recon.options import ReconOptions
 
-    run, opts = _resolve_method("auto", zernike, field, ReconOptions(psf=psf))
+    cfg = ms.SystemConfig()
+    run, opts = _resolve_method("auto", cfg, zernike, field, ReconOptions(psf=psf))
     assert run == method
     assert opts.dao_negligible == (NEGLIGIBLE_RMS if method == "wave" else 0.0)
-    run, opts = _resolve_method("auto", None, None, ReconOptions(dao_negligible=0.3))
+    run, opts = _resolve_method("auto", cfg, None, None, ReconOptions(dao_negligible=0.3))
     assert (run, opts.dao_negligible) == ("wave", 0.3)  # a given threshold is kept
 
 

@@ -42,10 +42,12 @@ from metasensor.dao.wavefront import DAO_MODES, fit_shifts, gradient_matrix, zer
 from metasensor.dao.wavefront import predicted_shifts as _predicted
 from metasensor.solvers.krishnan_fergus import DEFAULT_LAMBDA
 
-__all__ = ["DaoOptions", "DaoResult", "run_dao", "estimate_block_aberration", "JMAX"]
+__all__ = ["DaoOptions", "DaoResult", "run_dao", "estimate_block_aberration", "dao_unavailable",
+           "JMAX"]
 
 JMAX = 45
 MIN_SAMPLES = 8  # view samples per side a block needs for DAO
+MIN_VIEWS = 8  # used views DAO needs
 _METHODS = ("wave", "geometric")
 _ESTIMATORS = ("isa", "views")
 
@@ -212,9 +214,24 @@ def _used_views(cfg: SystemConfig, view_mask, amplitude, matrix) -> np.ndarray:
             raise ValueError(f"amplitude must have shape ({n}, {n}), got {amp.shape}")
         used = used & (amp > 0)
     used = used & (matrix[1] >= 0.5)
-    if used.sum() < 8:
+    if used.sum() < MIN_VIEWS:
         raise ValueError(f"only {int(used.sum())} usable views: cannot estimate a wavefront")
     return used
+
+
+def dao_unavailable(cfg: SystemConfig, view_mask=None) -> str | None:
+    """Why :func:`run_dao` cannot estimate a wavefront with this system's views (fewer than
+    ``MIN_VIEWS`` used views whose footprint lies at least half inside the pupil), or None."""
+    used = _used_views_or_none(cfg, view_mask)
+    return None if used is not None else (
+        f"this system has fewer than {MIN_VIEWS} views inside the pupil to estimate it from")
+
+
+def _used_views_or_none(cfg: SystemConfig, view_mask) -> np.ndarray | None:
+    try:
+        return _used_views(cfg, view_mask, None, gradient_matrix(cfg, jmax=JMAX))
+    except ValueError:
+        return None
 
 
 @dataclass

@@ -150,13 +150,28 @@ def _check_call(cfg, method: str, zernike, field_zernike, opts: ReconOptions) ->
                          "give the aberration or the bank, not both")
 
 
-def _resolve_method(method: str, zernike, field_zernike, opts: ReconOptions
+def _dao_unavailable(method: str, cfg: SystemConfig, opts: ReconOptions) -> str | None:
+    """For ``"auto"``: why DAO cannot run with ``cfg``'s views (None: it can)."""
+    if method != "auto":
+        return None
+    from metasensor.dao.estimate import dao_unavailable
+
+    return dao_unavailable(cfg)
+
+
+def _resolve_method(method: str, cfg: SystemConfig, zernike, field_zernike, opts: ReconOptions
                     ) -> tuple[str, ReconOptions]:
     """``"auto"``/``"none"`` resolved (:func:`metasensor.recon.dao_choice.choose_dao`) to the
     method run, and ``dao_negligible`` set from the choice unless given."""
     given = field_zernike is not None or (
         zernike is not None and bool(np.any(np.asarray(zernike, dtype=float))))
-    choice = choose_dao(method, aberration_given=given, bank_given=opts.psf is not None)
+    choice = choose_dao(method, aberration_given=given, bank_given=opts.psf is not None,
+                        unavailable=_dao_unavailable(method, cfg, opts))
+    if method == "auto" and choice.method == "isa" and not given and opts.psf is None:
+        import warnings
+
+        warnings.warn(f"reconstruct: the aberration is {choice.reason}", UserWarning,
+                      stacklevel=3)
     if opts.dao_negligible is None:
         opts = ReconOptions.resolve(opts, {"dao_negligible": choice.negligible})
     return choice.method, opts
@@ -279,7 +294,7 @@ def reconstruct(views, cfg: SystemConfig, method: str = "isa", zernike=None, fie
     t0 = time.perf_counter()
     opts = ReconOptions.resolve(options, settings)
     _check_call(cfg, method, zernike, field_zernike, opts)
-    method, opts = _resolve_method(method, zernike, field_zernike, opts)
+    method, opts = _resolve_method(method, cfg, zernike, field_zernike, opts)
     if opts.space_variant and method != "isa":  # "auto" with nothing given estimates it
         raise ValueError("space_variant builds banks at the blocks' corners from the given "
                          "aberration: give zernike or field_zernike, or use method='isa'")

@@ -144,7 +144,14 @@ def _say_dao(args: ReconstructArgs, inputs) -> None:
 
     z = parse_zernike(args.zernike)
     given = inputs.field_zernike is not None or (z is not None and bool(np.any(z)))
-    choice = choose_dao(args.method, aberration_given=given, bank_given=inputs.bank is not None)
+    bank = inputs.bank is not None
+    unavailable = None
+    if args.method == "auto" and not (given or bank):
+        from metasensor.dao.estimate import dao_unavailable
+
+        unavailable = dao_unavailable(inputs.config)
+    choice = choose_dao(args.method, aberration_given=given, bank_given=bank,
+                        unavailable=unavailable)
     typer.echo(f"aberration: {choice.reason}", err=True)
 
 

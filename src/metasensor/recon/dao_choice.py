@@ -42,7 +42,8 @@ class DaoChoice:
     reason: str
 
 
-def choose_dao(mode: str, *, aberration_given: bool, bank_given: bool) -> DaoChoice:
+def choose_dao(mode: str, *, aberration_given: bool, bank_given: bool,
+               unavailable: str | None = None) -> DaoChoice:
     """The reconstruction method for ``mode`` (one of :data:`DAO_CHOICES`).
 
     Parameters
@@ -55,6 +56,9 @@ def choose_dao(mode: str, *, aberration_given: bool, bank_given: bool) -> DaoCho
         block, its estimate always applied.
     aberration_given, bank_given : bool
         What the caller supplied besides the views.
+    unavailable : str or None
+        Why DAO cannot run on this system (:func:`metasensor.dao.estimate.dao_unavailable`);
+        ``"auto"`` then reconstructs without an estimate and says why.
 
     Returns
     -------
@@ -71,6 +75,8 @@ def choose_dao(mode: str, *, aberration_given: bool, bank_given: bool) -> DaoCho
     if aberration_given:
         return DaoChoice("isa", 0.0, "the given aberration is used as is (--dao wave estimates "
                                      "it per block, starting from it)")
+    if unavailable:
+        return DaoChoice("isa", 0.0, f"not estimated: {unavailable}")
     return DaoChoice("wave", NEGLIGIBLE_RMS,
                      f"no aberration given: wave DAO estimates it per block; a block under "
                      f"{NEGLIGIBLE_RMS:g} λ r.m.s. keeps the aberration-free bank "
