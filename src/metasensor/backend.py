@@ -34,27 +34,12 @@ def to_numpy(tensor: torch.Tensor) -> np.ndarray:
     return tensor.detach().cpu().numpy()
 
 
-def memory_room() -> int:
-    """Bytes a new allocation can take: the machine's available memory (psutil), or less where
-    the process's address-space limit (``RLIMIT_AS``, e.g. ``ulimit -v``) leaves less room."""
-    import psutil
-
-    avail = int(psutil.virtual_memory().available)
-    try:
-        import resource
-
-        soft, _ = resource.getrlimit(resource.RLIMIT_AS)
-        if soft != resource.RLIM_INFINITY:
-            avail = min(avail, max(0, soft - psutil.Process().memory_info().vms))
-    except (ImportError, OSError):  # pragma: no cover - no resource module (Windows)
-        pass
-    return avail
-
-
 def check_memory(nbytes: float, what: str) -> None:
     """Raise MemoryError (one line, naming ``what``) before an allocation of ``nbytes`` that the
-    memory left to the process (:func:`memory_room`) cannot hold, instead of swapping for
-    minutes first."""
+    memory left to the process (:func:`metasensor.io.memory.memory_room`) cannot hold, instead
+    of swapping for minutes first."""
+    from metasensor.io.memory import memory_room
+
     avail = memory_room()
     if nbytes > avail:
         raise MemoryError(f"{what} needs ~{nbytes / 2**30:.1f} GiB, more than the "

@@ -98,3 +98,52 @@ def test_write_views_names_what_it_cannot_store(tmp_path):
     with pytest.raises(TypeError, match="cfg must be a SystemConfig"):
         write_views(tmp_path / "w.tif", views, {"nnum": 3})
     assert list(tmp_path.iterdir()) == []  # nothing written, no temporary
+
+
+def test_declared_sizes_are_checked_before_decoding_in_every_reader(tmp_path, monkeypatch):
+    """A small compressed TIFF can declare gigabytes (the audit: 6.5 MB declaring 40000² float32
+    decoded whole by ``evaluate``, over 6 GB before it was killed): every command's TIFF reader
+    compares the declared size with the memory left first (here told only 10 kB is left)."""
+    from metasensor.io import tiff
+    from metasensor.sensor.calibration import Calibration
+
+    big = np.zeros((64, 64), np.float32)
+    tifffile.imwrite(tmp_path / "big.tif", big, compression="zlib")
+    frames = np.random.default_rng(3).integers(0, 4000, (9, 30, 30)).astype(np.uint16)
+    write_raw(tmp_path / "raw.tif", frames, description=CFG.to_json())
+    Calibration(nnum=3, pitch=3.0, rotation=0.0, center=(1.0, 1.0), lenslets=(10, 10),
+                sensor_shape=(30, 30), flat="big.tif").to_toml(tmp_path / "c.toml")
+    monkeypatch.setattr(tiff, "available_memory", lambda: 10_000)
+    f = tmp_path
+    for args in (["evaluate", f / "big.tif", "--out", f / "e"],
+                 ["simulate", "--scene", f / "big.tif", "--size", "32", "--out", f / "s"]):
+        refused(*args, match=f"{f / 'big.tif'}: declares")
+    code, err = run_cli("realign", f / "raw.tif", "--calib", f / "c.toml", "--flat", "--out",
+                        f / "v.tif")  # the flat field (its progress bar was open: two lines)
+    assert code == 2 and err.strip().splitlines()[-1].startswith(f"error: {f / 'big.tif'}: "
+                                                                  "declares"), err
+    assert not any((f / n).exists() for n in ("e", "s", "v.tif"))
+
+
+def test_calibrate_aberrations_file_on_a_full_disk_is_one_line(tmp_path, monkeypatch):
+    """The audit's SIGSEGV: ``calibrate-aberration --out full/s.h5`` crashed inside h5py on a
+    full disk. Its file is built in memory and written with plain I/O, so a full disk is one
+    ``OSError`` naming the file and nothing is left behind."""
+    import errno
+    from pathlib import Path
+
+    from metasensor.dao.system_aberration import SystemAberration
+
+    sa = SystemAberration(zernike=np.zeros((1, 1, 45)), shift_grid=np.zeros((3, 3, 2, 2, 2)),
+                          view_shape=(16, 16), config=CFG)
+
+    def full(self, data):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(Path, "write_bytes", full)
+    with pytest.raises(OSError, match=r"cannot write .*s\.h5: no space left on the device"):
+        sa.save(tmp_path / "s.h5")
+    monkeypatch.undo()
+    assert list(tmp_path.iterdir()) == []
+    sa.save(tmp_path / "s.h5")  # with room: written and read back
+    assert SystemAberration.load(tmp_path / "s.h5").view_shape == (16, 16)

@@ -137,6 +137,7 @@ def atomic_path(path: str | Path, suffix: str | None = None) -> Iterator[Path]:
             interrupt.check(since)  # a Ctrl-C something swallowed: nothing put in place
             os.replace(tmp_path, path)
         except OSError as exc:
+            interrupt.check(since)  # stopped meanwhile: the interrupt, not what it broke
             if str(path) in str(exc):  # already names the file
                 raise
             raise write_error(path, exc) from None
@@ -297,6 +298,7 @@ def staged_zarr(path: str | Path) -> Iterator[Path]:
     except BaseException as exc:
         discard_tree(tmp)  # no half-written store left behind
         if isinstance(exc, OSError):
+            interrupt.check(since)  # stopped meanwhile: the interrupt, not what it broke
             raise write_error(path, exc) from None
         raise
 

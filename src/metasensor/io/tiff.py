@@ -158,10 +158,11 @@ def open_tiff(path: Path | str):
 
 
 def available_memory() -> int:
-    """Bytes of memory available to a new allocation (psutil's ``available``)."""
-    import psutil
+    """Bytes of memory a new allocation can take (:func:`metasensor.io.memory.memory_room`:
+    psutil's ``available``, or less under an address-space limit)."""
+    from metasensor.io.memory import memory_room
 
-    return int(psutil.virtual_memory().available)
+    return memory_room()
 
 
 def _check_series(tif, path: Path, decoded: bool) -> None:

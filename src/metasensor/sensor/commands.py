@@ -344,8 +344,7 @@ def _flat_input(calib, calib_path):
 
 
 def _flat(calib, calib_path, cfg):
-    import tifffile
-
+    from metasensor.io.tiff import read_tiff
     from metasensor.sensor.rectify import flat_views
 
     if calib is None or calib.flat is None:
@@ -353,7 +352,10 @@ def _flat(calib, calib_path, cfg):
     path = calib.flat_path(calib_path)
     if not path.is_file():
         raise FileNotFoundError(f"flat-field map not found: {path}")
-    flat = tifffile.imread(path)
+    flat = read_tiff(path)  # damaged or oversized: one line naming it, before decoding
+    if flat.ndim != 2 or flat.dtype.kind not in "buif":
+        raise ValueError(f"flat-field map {path} must be one 2-D image of real numbers, got "
+                         f"{flat.dtype} {flat.shape}")
     n = cfg.nnum
     (i0, j0), (ly, lx) = calib.flat_origin, calib.lenslets
     if i0 < 0 or j0 < 0 or (i0 + ly) * n > flat.shape[0] or (j0 + lx) * n > flat.shape[1]:
