@@ -133,9 +133,10 @@ def _scenario_rows(quick: bool) -> list[dict]:
     for name in ("plastic-wrap", "telescope", "gigapixel"):
         with tempfile.TemporaryDirectory() as tmp:
             s = run_scenario(name, tmp, progress=False, **small.get(name, {}))
-        row = {"case": name, "seconds": s["seconds"]}
+        row = {"case": name, "seconds": s["seconds"], "cpu_seconds": s["cpu_seconds"]}
         if name == "plastic-wrap":
-            row.update({k: s["gains"][k] for k in s["gains"]})
+            row.update({k: v for k, v in s["gains"].items() if not isinstance(v, dict)})
+            row["bar_px"] = {r["sensor"]: r.get("bar_px") for r in s["table"]}
         elif name == "telescope":
             row.update({"pupil_error": s["pupil"]["error"],
                         "residual_max_waves": s["residual_max_waves"],

@@ -343,3 +343,19 @@ def test_wave_and_geometric_results_share_one_contract():
             assert np.abs(res.shifts[used] - modelled).max() < 0.25
             ideal = psf_bank(cfg, None, None, None, res.psf_size)
             np.testing.assert_array_equal(block_psfs(cfg, res), geometric_psfs(ideal, res.shifts))
+
+
+def test_block_takes_a_psf_taller_than_wide(rng):
+    # a bank whose light spreads over 41 rows but 5 columns (a strong astigmatic or high-order
+    # wavefront): the deconvolution grid must hold the taller side (it took the width and
+    # refused "kernel larger than the image" on a 16 x 16-sample block)
+    k = 41
+    bank = np.zeros((15, 15, k, k), np.float32)
+    bank[..., :, 18:23] = rng.random((15, 15, k, 5)).astype(np.float32)
+    used = CFG.view_mask()
+    views = torch.tensor(rng.random((int(used.sum()), 4, 16)), dtype=torch.float32)
+    blk = DaoBlock(views, CFG, used, 5e4, 8)
+    blk.set_psfs(bank)
+    assert blk.kernels.shape[-2:] == (k, 5)
+    est = blk.estimate(torch.zeros((int(used.sum()), 2)))
+    assert est.shape == (12, 48) and bool(torch.isfinite(est).all())

@@ -57,3 +57,27 @@ def test_scenario_end_to_end_small(tmp_path, name, settings):
     for fig in saved["figures"].values():
         assert (tmp_path / fig).is_file()
     assert summary["seconds"] > 0
+
+
+def test_bar_gains_count_finer_groups_and_flag_bounds():
+    from metasensor.scenarios.measure import bar_gains, bar_periods
+    from metasensor.simulation.bars import bar_chart, bar_groups
+
+    chart = bar_chart(256).astype(np.float64)
+    groups = bar_groups(256)
+    sharp = bar_periods(chart, groups, exclude=(180, 256, 0, 90))
+    assert "bottom-left" not in sharp and "centre" in sharp
+    assert all(v["period_px"] is not None and v["period_px"] <= 2.5 for v in sharp.values())
+    # a Gaussian of sigma s passes a bar period p with contrast exp(-2 pi^2 s^2 / p^2) (first
+    # harmonic): sigma 1.2 px loses the 2-4 px groups, sigma 8 px every group of <= 7 px
+    mid = bar_periods(ndimage.gaussian_filter(chart, 1.2), groups)
+    lost = bar_periods(ndimage.gaussian_filter(chart, 8.0), groups)
+    assert all(v["period_px"] is None for v in lost.values())
+    g = bar_gains(mid, sharp)
+    assert all(1.5 <= v["gain"] <= 3.5 and not v["bound"] for k, v in g.items())
+    bound = bar_gains(lost, sharp)
+    assert all(v["bound"] and v["gain"] == lost[k]["coarsest_px"] / sharp[k]["period_px"]
+               for k, v in bound.items())
+    assert bar_gains(sharp, lost)["centre"] == {"gain": 0.0, "bound": False}
+    with pytest.raises(ValueError, match="no bar group"):
+        bar_periods(chart, groups, exclude=(0, 256, 0, 256))

@@ -89,7 +89,7 @@ class DaoBlock:
                       self.views.device)
         self.energy = h.sum(dim=(-2, -1)).clamp(min=1e-12)
         self.kernels = h / self.energy[:, None, None]
-        k = h.shape[-1]
+        k = max(h.shape[-2:])  # the crops are centred but may differ (a tall or wide PSF)
         self.pad = k // 2 + 4
         hh, ww = self.hw
         self.shape = (hh + 2 * self.pad, ww + 2 * self.pad)

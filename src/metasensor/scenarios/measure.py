@@ -5,6 +5,11 @@
   which the error-to-truth power ratio stays under 0.5) of one region, so that scenario
   figures and the quality benchmark use one definition. Bar groups "k times finer" are k
   times this frequency.
+- :func:`bar_periods` / :func:`bar_gains`: the finest three-bar group resolved per location of
+  the bar chart (:func:`metasensor.metrics.bars.bar_resolution`) and the factor by which one
+  sensor resolves finer groups than another there; where the worse sensor resolves none of
+  the location's groups, the factor is a lower bound (its coarsest period over the better
+  sensor's), flagged as such.
 - :func:`lattice_energy`: the energy of an image sequence's kymograph at the scan lattice's
   temporal frequency (one cycle per scan step of a sliding window) relative to its mean power
   (hand-written: a one-dimensional spectrum along time).
@@ -14,7 +19,8 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["resolved_frequency", "field_resolution", "lattice_energy"]
+__all__ = ["resolved_frequency", "field_resolution", "bar_periods", "bar_gains",
+           "lattice_energy"]
 
 
 def resolved_frequency(image, truth, threshold: float = 0.5) -> float:
@@ -49,6 +55,57 @@ def field_resolution(image, truth, grid: tuple[int, int] = (4, 4), **kw) -> np.n
     return np.array([[resolved_frequency(img[y[0]:y[-1] + 1, x[0]:x[-1] + 1],
                                          tru[y[0]:y[-1] + 1, x[0]:x[-1] + 1], **kw)
                       for x in xs] for y in ys])
+
+
+def bar_periods(image, groups, exclude=None) -> dict[str, dict]:
+    """Finest resolved bar period per chart location of ``image``.
+
+    Parameters
+    ----------
+    image : array_like
+        2-D image on the chart's pixel grid.
+    groups : list of BarGroup
+        :func:`metasensor.simulation.bars.bar_groups` in the image's coordinates.
+    exclude : (y0, y1, x0, x1) or None
+        A box [px]; locations with a group inside it are left out (e.g. covered by an object).
+
+    Returns
+    -------
+    dict
+        ``{location: {"period_px": finest resolved period or None, "coarsest_px": p}}``.
+    """
+    from metasensor.metrics.bars import bar_resolution
+
+    keep = list(groups)
+    if exclude is not None:
+        y0, y1, x0, x1 = exclude
+        hit = {g.location for g in keep if g.y0 < y1 and g.y0 + g.extent > y0
+               and g.x0 < x1 and g.x0 + g.extent > x0}
+        keep = [g for g in keep if g.location not in hit]
+    if not keep:
+        raise ValueError("no bar group left outside the excluded box")
+    res = bar_resolution(image, keep)
+    return {loc: {"period_px": r["period_px"], "coarsest_px": r["coarsest_px"]}
+            for loc, r in res.items()}
+
+
+def bar_gains(worse: dict, better: dict) -> dict[str, dict]:
+    """Per location, how many times finer ``better`` resolves than ``worse`` (both from
+    :func:`bar_periods`): ``{"gain": p_worse / p_better, "bound": True}`` where ``worse``
+    resolves nothing (then ``p_worse`` is taken as the coarsest period: a lower bound);
+    gain 0 where ``better`` resolves nothing. Locations read in both."""
+    out = {}
+    for loc, w in worse.items():
+        if loc not in better:
+            continue
+        pb = better[loc]["period_px"]
+        pw = w["period_px"]
+        if pb is None:
+            out[loc] = {"gain": 0.0, "bound": False}
+        else:
+            out[loc] = {"gain": (w["coarsest_px"] if pw is None else pw) / pb,
+                        "bound": pw is None}
+    return out
 
 
 def lattice_energy(kymograph, period: int) -> float:

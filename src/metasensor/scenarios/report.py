@@ -27,28 +27,31 @@ class ScenarioSettings:
 
     blocks: tuple[int, int] = (2, 2)
     snr_db: float = 30.0
-    iterations: int | None = 6  # Richardson–Lucy (fast); None: the library default (HQS)
+    iterations: int | None = None  # None: the library default (HQS); an int: Richardson–Lucy
     seed: int = 0
 
 
 @dataclass(frozen=True)
 class ScenarioRun:
-    """A running scenario: its output folder, its progress bar (tqdm) and its start time
-    (``time.perf_counter()``, seconds)."""
+    """A running scenario: its output folder, its progress bar (tqdm), its start time
+    (``time.perf_counter()``, seconds) and the process's CPU time then
+    (``time.process_time()``, seconds)."""
 
     out: Path
     steps: Any
     start: float
+    cpu_start: float = 0.0
 
     def seconds(self) -> float:
         """Wall time since the start, seconds."""
         return time.perf_counter() - self.start
 
     def finish(self, summary: dict, figures: dict, title: str) -> dict:
-        """Add the wall time (``seconds``) and the figures' file names (``figures``) to
-        ``summary``, write the report (:func:`write_report`) and count the last step; returns
-        the summary as written."""
+        """Add the wall time (``seconds``), the process's CPU time (``cpu_seconds``, all its
+        threads) and the figures' file names (``figures``) to ``summary``, write the report
+        (:func:`write_report`) and count the last step; returns the summary as written."""
         summary = {**summary, "seconds": self.seconds(),
+                   "cpu_seconds": time.process_time() - self.cpu_start,
                    "figures": {k: Path(v).name for k, v in figures.items()}}
         summary = write_report(self.out, summary, title)
         self.steps.update()
@@ -65,7 +68,7 @@ def scenario_run(out: str | Path, desc: str, total: int, progress: bool) -> Iter
     out.mkdir(parents=True, exist_ok=True)
     start = time.perf_counter()
     with tqdm(total=total, desc=desc, disable=not progress) as steps:
-        yield ScenarioRun(out, steps, start)
+        yield ScenarioRun(out, steps, start, time.process_time())
 
 
 def to_jsonable(value):
