@@ -98,7 +98,7 @@ def check(since: int) -> None:
 def blocked() -> Iterator[None]:
     """SIGINT and SIGTERM blocked in the calling thread for the block; threads started inside
     inherit the block and never take them (the main thread does)."""
-    if not _main_thread():
+    if not _main_thread() or not hasattr(signal, "pthread_sigmask"):  # Windows: no masks
         yield
         return
     old = signal.pthread_sigmask(signal.SIG_BLOCK, _STOP)
