@@ -5,7 +5,8 @@ process, as a person would type them. Measures each command's wall time and its 
 from the start to the first output, between outputs, or from the last output to the exit.
 
 Target: no gap over 10 s (a person waiting should see progress at least that often).
-Rows: command, seconds, longest gap (s), the last output before that gap.
+Rows: command, seconds, longest gap (s), the last output before that gap. ``FIRST_HOUR_LOGS``
+names a folder that keeps each command's terminal output.
 """
 
 from __future__ import annotations
@@ -90,10 +91,14 @@ def run(quick: bool = False) -> list[dict]:
 
     torch.set_num_threads(1)
     rows = []
+    logs = os.environ.get("FIRST_HOUR_LOGS")  # a folder to keep each command's output in
     with tempfile.TemporaryDirectory() as tmp:
         for args in steps(128 if quick else 256):
             row = watch(args, tmp)
             output = row.pop("output")
+            if logs:
+                Path(logs).mkdir(parents=True, exist_ok=True)
+                (Path(logs) / f"{args[0]}.txt").write_text(output)
             rows.append(row)
             if row["exit"] != 0:
                 raise RuntimeError(f"{row['command']} failed: {output[-400:]}")

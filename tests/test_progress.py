@@ -26,6 +26,7 @@ def test_reconstruct_with_dao_reports_each_blocks_wavefront(capsys):
     assert "update 2: ISA image, iteration 1/5; wavefront" in err  # below 0.5 λ: the ISA
     line = next(ln for ln in err.replace("\r", "\n").splitlines() if ln.startswith("block (0, 0)"))
     assert "wavefront" in line and "DAO update(s)" in line
+    assert "block (0, 0): PSF bank of the estimate ready" in err  # before the solver's steps
 
 
 def test_simulate_shows_its_steps(capsys):

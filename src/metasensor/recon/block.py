@@ -11,6 +11,7 @@ block_psfs`). The views of the bank's visiting order become the operator's data
 
 from __future__ import annotations
 
+import sys
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -194,6 +195,11 @@ def _bank(task: BlockTask, window: np.ndarray
         return bank, start, history, merged
     bank = (task.psf_fn(task.cfg, merged, task.device) if task.psf_fn is not None
             else banks.block_psfs(task.cfg, res, device=task.device))
+    if shown:  # the estimate's bank is new: say it is done before the solver's first step
+        from tqdm import tqdm
+
+        tqdm.write(f"block {tuple(int(i) for i in task.block.index)}: PSF bank of the "
+                   f"estimate ready ({np.shape(bank)[-1]} px), solving", file=sys.stderr)
     return bank, merged, history, merged
 
 
