@@ -35,6 +35,11 @@ Studies (the ``study`` column):
 - ``--limit``: the linear-MMSE (Wiener) limit of the meta-imaging sensor and the 2D sensor on the
   six photographs from the operators' spectra (``benchmarks/quality_limit.py``,
   ``results/quality_limit.json``).
+- ``demo``: ``metasensor demo`` at its defaults (the bar chart through the single plastic lens,
+  field-dependent aberrations of up to 2 λ r.m.s., both light-field cameras at the operating
+  focus offset, 384 px): per image SSIM, PSNR, resolved frequency, the fringe ratio at the
+  block borders and the finest bar group per location; ``python benchmarks/bench_quality.py
+  --demo`` writes ``results/quality_demo.json`` (merged into the table when present).
 
 Figures: ``results/quality.png`` (SSIM and resolved frequency per scene, and against the focus
 offset).
@@ -62,6 +67,7 @@ ABERRATED_SCENES = ("chart", "camera")
 ABERRATIONS = (1.0, 3.0)
 HL_LAMBDAS = (100.0, 400.0, 2e3, 1e4, 5e4)  # KF data weights; 400 was best on the camera
 ABERRATED_JSON = HERE / "results" / "quality_aberrated.json"
+DEMO_JSON = HERE / "results" / "quality_demo.json"
 
 
 def falling_zernike(rms: float, seed: int = 0, jmax: int = 45) -> np.ndarray:
@@ -190,6 +196,8 @@ def run(quick: bool = False, sink=None) -> list[dict]:
         rows += json.loads(ABERRATED_JSON.read_text())["rows"]
     if not quick and (HERE / "results" / "quality_photos.json").is_file():  # --photos rows
         rows += json.loads((HERE / "results" / "quality_photos.json").read_text())["rows"]
+    if not quick and DEMO_JSON.is_file():
+        rows += json.loads(DEMO_JSON.read_text())["rows"]
     _plot(rows, HERE / "results" / ("quality_quick.png" if quick else "quality.png"))
     return rows
 
@@ -205,6 +213,28 @@ def run_aberrated(quick: bool = False) -> list[dict]:
             rows += case(name, SIZE_QUICK if quick else SIZE_FULL, "aberrated",
                          zernike=falling_zernike(rms), method="wave")
             print(rows[-3:], flush=True)
+    return rows
+
+
+def run_demo_rows(out: Path) -> list[dict]:
+    """The demo at its defaults (module docstring), one row per image, single-threaded."""
+    import torch
+
+    from metasensor.report.demo import DemoSettings, run_demo
+
+    torch.set_num_threads(1)
+    settings = DemoSettings()
+    summary = run_demo(out, settings, progress=False)
+    rows = []
+    for r in summary["table"]:
+        row = {"scene": settings.scene, "study": "demo", "image": r["sensor"],
+               "focus_offset_waves": settings.focus_offset, "seconds": summary["seconds"],
+               "ssim": r.get("ssim"), "psnr_db": r.get("psnr_db"),
+               "resolved": r.get("resolved_cpp"), "fringe_ratio": r.get("fringe_ratio")}
+        for b in summary["bar_groups"]:
+            if r["sensor"] in b:
+                row[f"bar_px_{b['location']}"] = b[r["sensor"]]
+        rows.append(row)
     return rows
 
 
@@ -263,6 +293,19 @@ if __name__ == "__main__":
 
             atomic_write_text(ABERRATED_JSON, json.dumps({"rows": result}, indent=2,
                                                         default=float))
+    elif "--demo" in sys.argv:  # --demo [FOLDER]: the demo's report goes to FOLDER if given
+        import tempfile
+
+        from metasensor.io.atomic import atomic_write_text
+
+        at = sys.argv.index("--demo") + 1
+        keep = sys.argv[at] if at < len(sys.argv) and not sys.argv[at].startswith("-") else None
+        with tempfile.TemporaryDirectory() as tmp:
+            result = run_demo_rows(Path(keep or tmp))
+        atomic_write_text(DEMO_JSON, json.dumps({"benchmark": "quality", "study": "demo",
+                                                 "rows": result}, indent=2, default=float))
+        for row in result:
+            print(row)
     elif "--progressive" in sys.argv:  # results/quality.json rewritten after every case
         from metasensor.io.atomic import atomic_write_text
 

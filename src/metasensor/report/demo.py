@@ -1,12 +1,20 @@
 """The end-to-end demo (``metasensor demo`` / ``make demo``).
 
-Simulate the built-in ISO 12233-style resolution chart through one cheap single lens with strong,
-field-dependent aberrations (:class:`metasensor.simulation.lens.SingleLens`); capture it with three
-sensors of the same pixel pitch and photon budget — a conventional 2D sensor, a plain light-field
-camera (1 x 1 scan) and the meta-imaging sensor (5 x 5 scan); realign the raw frames; reconstruct
-both light-field captures with the known system aberration in multisite blocks; and write a report
-(PNG figures and an HTML page) with full field, zoomed centre and corners, PSNR / SSIM and the
-slanted-edge MTF50 at the field centre and edge.
+Simulate the built-in bar-group chart (three-bar groups of 2–24 px periods at the centre, the
+edge midpoints and the corners, :mod:`metasensor.simulation.bars`; or the ISO 12233-style chart)
+through one cheap single lens with strong, field-dependent aberrations
+(:class:`metasensor.simulation.lens.SingleLens`); capture it with three sensors of the same pixel
+pitch and photon budget — a conventional 2D sensor (in focus), a plain light-field camera
+(1 x 1 scan) and the meta-imaging sensor (5 x 5 scan), both light-field cameras at the operating
+point (:data:`metasensor.simulation.capture.OPERATING_FOCUS_OFFSET` off the scene's plane);
+realign the raw frames; reconstruct both light-field captures with the known system aberration
+in multisite blocks; restore the 2D sensor's image with the same kind of prior (hyper-Laplacian
+deconvolution with the on-axis PSF, best of three weights by the truth); and write a report (PNG
+figures and an HTML page) with the full field and its differences to the truth, zoomed centre
+and corners, PSNR / SSIM, the resolved frequency (:mod:`metasensor.metrics.spectral`), the finest
+bar group per chart location (:mod:`metasensor.metrics.bars`), the fringe ratio at the block
+borders (:mod:`metasensor.metrics.fringes`) and, on the ISO chart, the slanted-edge MTF50 at the
+field centre and edge.
 """
 
 from __future__ import annotations
@@ -21,6 +29,8 @@ import numpy as np
 
 from metasensor.config import SystemConfig
 from metasensor.io.atomic import atomic_write_text
+from metasensor.report.demo_measure import comparison_figure, measure, restore_2d
+from metasensor.simulation.capture import OPERATING_FOCUS_OFFSET
 
 __all__ = ["DemoSettings", "run_demo", "sensor_field_zernike", "demo_warnings"]
 
@@ -39,27 +49,28 @@ class DemoSettings:
     whole field: on axis sharp; field curvature and astigmatism of ~1.1 waves r.m.s. at the
     edge midpoints, 1.9 at 0.95 of the diagonal (``edge_rms_waves`` in the summary) and 2.1 in
     the corners (the plain Seidel sums of a 135 mm f/10 plastic singlet; ``lens_strength``
-    scales them); ``field_blocks``: grid of PSF banks of the simulator;
-    ``blocks``: multisite grid of the reconstruction."""
+    scales them); ``field_blocks``: grid of PSF banks of the simulator (finer than the
+    reconstruction's field points, so that the simulated field is not the reconstruction's own
+    interpolation of it); ``blocks``: multisite grid of the reconstruction."""
 
     size: int = 384
     scan: int = 5
     snr_db: float = 30.0
     lens_strength: float = 1.0
     field_px: int = 6004
-    blocks: tuple[int, int] = (3, 3)
-    field_blocks: tuple[int, int] = (3, 3)
-    # ISA iterations (the library default is 5). Measured on this demo (meta-imaging row): 5 its
-    # PSNR 16.52 dB, SSIM 0.617, edge MTF50 0.108 c/px; 6 its 16.61 dB, 0.608, 0.138; 8 its
-    # 16.66 dB, 0.590, 0.151 (2D sensor 0.037): 6 sharpens the aberrated field edge most for
-    # the least SSIM.
+    blocks: tuple[int, int] = (4, 4)
+    field_blocks: tuple[int, int] = (6, 6)
+    # the chart: "bars" (bar groups at nine places) or "chart" (ISO 12233-style: slanted-edge
+    # squares, a Siemens star, for the slanted-edge MTF)
+    scene: str = "bars"
+    # defocus of both light-field cameras [waves r.m.s., Noll Z4] (the 2D sensor stays in focus)
+    focus_offset: float = OPERATING_FOCUS_OFFSET
+    # the meta-imaging reconstruction's space-variant model (ReconOptions.space_variant)
+    space_variant: bool = True
+    # Richardson-Lucy iterations of the plain light field (and of the meta-imaging row with
+    # solver "rl"); ISA solver of the meta-imaging row: "hqs" (the sparse-gradient prior,
+    # solvers.hqs, after view registration) or "rl". Measurements: docs/decisions.md.
     iterations: int | None = 6
-    # ISA solver of the meta-imaging row: "hqs" (the sparse-gradient prior, solvers.hqs) or "rl"
-    # (Richardson-Lucy with ``iterations``); the plain light field (1 x 1 scan) always uses RL.
-    # Measured on this demo: HQS (after view registration) PSNR 16.83 dB, SSIM 0.830, MTF50
-    # centre / edge 0.177 / 0.217 c/px, 92 s in all (unregistered: 16.68 dB, 0.816, 0.186 /
-    # 0.251, 71 s); RL (6 its) 16.61 dB, 0.608, 0.089 / 0.138. HQS renders bars finer than
-    # it resolves (the star's centre, the finest bar groups) flat grey, where RL shows them aliased.
     solver: str = "hqs"
     seed: int = 0
     extra: dict = field(default_factory=dict)
@@ -184,6 +195,10 @@ def _check_settings(s: DemoSettings) -> None:
     SystemConfig(scan=s.scan)  # an impossible scan period fails here
     if not math.isfinite(s.snr_db):
         raise ValueError(f"snr_db must be a finite number of dB, got {s.snr_db!r}")
+    if s.scene not in ("bars", "chart"):
+        raise ValueError(f"the demo's chart (scene) must be 'bars' or 'chart', got {s.scene!r}")
+    if not math.isfinite(s.focus_offset):
+        raise ValueError(f"focus_offset must be a finite number of waves, got {s.focus_offset!r}")
     if min(s.blocks) < 1 or min(s.field_blocks) < 1:
         raise ValueError(f"blocks must be >= 1 each, got {s.blocks} / {s.field_blocks}")
     d = SystemConfig(scan=s.scan).scan_step_px  # blocks too small even for the whole scene
@@ -197,11 +212,12 @@ def _simulate_both(scene: np.ndarray, cfg: SystemConfig, fz_sensor, s: DemoSetti
 
     steps.set_postfix_str("simulating the meta-imaging sensor")
     cap = simulate(scene, cfg, field_zernike=fz_sensor, snr_db=s.snr_db, seed=s.seed,
-                   field_blocks=s.field_blocks)
+                   field_blocks=s.field_blocks, focus_offset=s.focus_offset)
     steps.update()
     steps.set_postfix_str("simulating the plain light-field camera")
     lf = simulate(scene, cfg.replace(scan=1), field_zernike=fz_sensor, snr_db=s.snr_db,
-                  seed=s.seed + 1, comparison=False, field_blocks=s.field_blocks)
+                  seed=s.seed + 1, comparison=False, field_blocks=s.field_blocks,
+                  focus_offset=s.focus_offset)
     steps.update()
     return cap, lf
 
@@ -211,17 +227,20 @@ def _reconstruct_both(cap, lf, fz_sensor, scene_shape, s: DemoSettings, steps):
     meta-imaging sensor's with ``s.solver``, the plain light field's with Richardson–Lucy."""
     import metasensor as ms
 
+    focus = np.array([0.0, 0.0, 0.0, s.focus_offset]) if s.focus_offset else None
     steps.set_postfix_str("reconstructing (meta-imaging, multisite)")
     views = ms.realign(cap.frames, cap.config, cap.scan_order)
     fz_meta = sensor_field_zernike(fz_sensor, cap.config, scene_shape, cap.truth.shape)
-    rec = ms.reconstruct(views, cap.config, field_zernike=fz_meta, blocks=s.blocks,
-                         iterations=s.iterations if s.solver == "rl" else None,
-                         solver=s.solver, register=s.solver == "hqs")
+    hqs = s.solver == "hqs"
+    rec = ms.reconstruct(views, cap.config, method="isa", zernike=focus, field_zernike=fz_meta,
+                         blocks=s.blocks, iterations=None if hqs else s.iterations,
+                         solver=s.solver, register=hqs, space_variant=s.space_variant and hqs)
     steps.update()
     steps.set_postfix_str("reconstructing (plain light field)")
     fz_lf = sensor_field_zernike(fz_sensor, lf.config, scene_shape, lf.truth.shape)
-    rec_lf = ms.reconstruct(lf.views, lf.config, field_zernike=fz_lf, blocks=s.blocks,
-                            iterations=s.iterations, solver="rl")
+    rec_lf = ms.reconstruct(lf.views, lf.config, method="isa", zernike=focus,
+                            field_zernike=fz_lf, blocks=s.blocks, iterations=s.iterations,
+                            solver="rl")
     steps.update()
     return rec, rec_lf
 
@@ -248,27 +267,34 @@ def run_demo(out: str | Path, settings: DemoSettings | None = None, progress: bo
 
     lens = SingleLens(strength=s.lens_strength)
     cfg = lens.config(SystemConfig(scan=s.scan))
-    scene = load_scene("chart", s.size).astype(np.float32)
+    scene = load_scene(s.scene, s.size).astype(np.float32)
     fz_sensor = lens.field_zernike(cfg, (s.field_px, s.field_px))
     cap, lf = _simulate_both(scene, cfg, fz_sensor, s, steps)
     rec, rec_lf = _reconstruct_both(cap, lf, fz_sensor, scene.shape, s, steps)
     steps.set_postfix_str("measuring and writing the report")
+    meta_name = f"meta-imaging sensor ({s.scan}x{s.scan} scan)"
     results = {
         "2D sensor": (cap.sensor2d, cap.truth),
         "plain light field (1x1 scan)": (np.asarray(rec_lf.image), lf.truth),
-        "meta-imaging sensor (5x5 scan)": (np.asarray(rec.image), cap.truth),
+        meta_name: (np.asarray(rec.image), cap.truth),
     }
-    if s.scan != 5:
-        results[f"meta-imaging sensor ({s.scan}x{s.scan} scan)"] = results.pop(
-            "meta-imaging sensor (5x5 scan)")
-    table = _quality_table(results)
+    on_axis = fz_sensor(np.zeros(1), np.zeros(1))[0]
+    restored = {"2D sensor + prior": (restore_2d(cap, on_axis), cap.truth)}
+    table = _quality_table({**results, **restored})
+    d = cap.config.scan_step_px
+    places = {k: (cap.offset, (cap.truth.shape, s.blocks, d)) for k in (*results, *restored)}
+    places["plain light field (1x1 scan)"] = (lf.offset, (lf.truth.shape, s.blocks,
+                                                          lf.config.scan_step_px))
+    bars = measure(table, {**results, **restored}, places, s.size, s.scene == "bars")
     figs = _figures(out, cap, lf, results, s.size // 5)
+    figs["comparison"] = comparison_figure(out / "comparison.png", cap, lf, results)
     seconds = time.perf_counter() - t_start
     summary = {
         "warnings": notes,
         "settings": {k: v for k, v in s.__dict__.items() if k != "extra"},
         "config": cfg.to_dict(),
         "table": table,
+        "bar_groups": bars,
         "seconds": seconds,
         "edge_rms_waves": float(np.sqrt((fz_sensor(np.array(0.95), np.array(0.95))[3:] ** 2
                                          ).sum())),
