@@ -88,9 +88,36 @@ def stitch(tile_shape, grid, overlap: int, chunk: int, seed: int = 0, scheduler=
                       ramp=overlap // 2, scheduler=scheduler, num_workers=os.cpu_count())
     t_blend = time.perf_counter() - t1
     mp = layout.shape[0] * layout.shape[1] / 1e6
+    seam, truth_seam = _seams(out, layout, pos, seed)
     return {"tiles": len(paths), "tile_shape": list(tile_shape), "mosaic_mp": mp,
             "registration_error_px": err, "register_s": t_reg, "blend_s": t_blend,
-            "s_per_mp": (t_reg + t_blend) / mp, "out": str(out), "folder": str(work)}
+            "s_per_mp": (t_reg + t_blend) / mp, "seam_ratio": seam,
+            "truth_seam_ratio": truth_seam, "out": str(out), "folder": str(work)}
+
+
+def _seams(out, layout, pos, seed: int, half: int = 40) -> tuple[float, float]:
+    """Seam ratio (:func:`metasensor.mosaic.seams.seam_ratio`) at every tile edge inside the
+    mosaic (where a later tile starts and an earlier one ends), read on strips of 2 x ``half``
+    pixels across each edge, and the same on the exact texture: (mosaic, truth)."""
+    from metasensor.mosaic import open_mosaic
+    from metasensor.mosaic.seams import seam_ratio
+
+    img = open_mosaic(out)
+    (h, w), (th, tw) = layout.shape, layout.tile_shape
+    rows = sorted({int(round(pos[(i, 0)][0])) for i in range(1, layout.grid[0])}
+                  | {int(round(pos[(i, 0)][0] + th)) for i in range(layout.grid[0] - 1)})
+    cols = sorted({int(round(pos[(0, j)][1])) for j in range(1, layout.grid[1])}
+                  | {int(round(pos[(0, j)][1] + tw)) for j in range(layout.grid[1] - 1)})
+    worst, worst_truth = 0.0, 0.0
+    for y in (r for r in rows if half <= r <= h - half):
+        a, t = np.asarray(img[y - half:y + half]), texture(y - half, 0, 2 * half, w, seed)
+        worst = max(worst, seam_ratio(a, [half], []))
+        worst_truth = max(worst_truth, seam_ratio(t, [half], []))
+    for x in (c for c in cols if half <= c <= w - half):
+        a, t = np.asarray(img[:, x - half:x + half]), texture(0, x - half, h, 2 * half, seed)
+        worst = max(worst, seam_ratio(a, [], [half]))
+        worst_truth = max(worst_truth, seam_ratio(t, [], [half]))
+    return worst, worst_truth
 
 
 def _child_stitch(tile_shape, grid, overlap, chunk) -> dict:
