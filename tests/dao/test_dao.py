@@ -359,3 +359,28 @@ def test_block_takes_a_psf_taller_than_wide(rng):
     assert blk.kernels.shape[-2:] == (k, 5)
     est = blk.estimate(torch.zeros((int(used.sum()), 2)))
     assert est.shape == (12, 48) and bool(torch.isfinite(est).all())
+
+
+def test_a_diverging_update_is_refused_with_one_warning(monkeypatch):
+    # an update whose wavefront sends rays beyond twice the largest shift DAO measures (20 waves
+    # of Noll 45: hundreds of pixels) is not applied: DAO stops, keeps the estimate before it
+    # and says so once (a plastic-wrap run grew 725-px PSF windows and 9 GB banks otherwise)
+    import metasensor.dao.estimate as est
+    from metasensor.dao.banks import ray_reach_px
+
+    cfg = SystemConfig(nnum=9, mla_pitch=41.4e-6, mla_focal=414e-6, scan=3)
+    bank = ms.view_psfs(cfg)
+    views, _ = synth_views(cfg, _scene(96 + bank.shape[-1]), bank, snr_db=40)
+    real = est.fit_shifts
+
+    def wild(*args, **kwargs):
+        fit = real(*args, **kwargs)
+        fit.zernike[44] = 20.0
+        return fit
+
+    monkeypatch.setattr(est, "fit_shifts", wild)
+    assert ray_reach_px(cfg, np.eye(45)[44] * 20.0, cfg.view_mask()) > 100
+    with pytest.warns(RuntimeWarning, match="DAO stopped after 0 update") as rec:
+        res = run_dao(views, cfg, method="wave", max_iter=3, init=np.eye(45)[3] * 0.05)
+    assert len(rec) == 1
+    assert res.history == [] and np.allclose(res.zernike, np.eye(45)[3] * 0.05)

@@ -17,7 +17,9 @@ Alternate, starting from φ = ``init`` (or 0):
 4. fit the shifts by Zernike modes 4–45 plus a common offset (:mod:`metasensor.dao.wavefront`;
    each view weighted by the precision of its shift, not in the paper), add the fit to φ.
    Stop when the r.m.s. of the update is below ``tol`` (0 runs all) or after ``max_iter``
-   updates.
+   updates. An update whose wavefront would send the used views' rays beyond twice
+   ``max_shift_px`` (:func:`metasensor.dao.banks.ray_reach_px`) is not applied: DAO stops
+   there with one warning (a diverging estimate; not in the paper).
 
 ``DaoResult.history`` holds the r.m.s. (waves, modes 4–45) of every update. Views used:
 ``cfg.view_mask()`` (or ``view_mask``), and, when a pupil amplitude is given, its lit views. Why
@@ -36,7 +38,7 @@ import torch
 
 from metasensor.backend import as_tensor, resolve_device, to_numpy
 from metasensor.config import SystemConfig
-from metasensor.dao.banks import geometric_psfs, psf_bank, psf_window
+from metasensor.dao.banks import geometric_psfs, psf_bank, psf_window, ray_reach_px
 from metasensor.dao.block import DaoBlock
 from metasensor.dao.wavefront import DAO_MODES, fit_shifts, gradient_matrix, zernike_rms
 from metasensor.dao.wavefront import predicted_shifts as _predicted
@@ -254,6 +256,7 @@ class _Run:
     shifts: np.ndarray | None = None
     image: torch.Tensor | None = None
     say: Any = None  # callable(str): what the update is doing (the progress bar's postfix)
+    rejected: float = 0.0  # ray reach (px) of an update refused as beyond DAO's range
 
     def tell(self, text: str) -> None:
         """Say what the update is doing (and the wavefront so far) on the progress bar."""
@@ -313,6 +316,10 @@ def _update(run: _Run) -> None:
         wts = wts / mean_w if mean_w > 0 else None
     fit = fit_shifts(np.nan_to_num(s_full), run.cfg, mask=used & ~clipped, modes=opts.modes,
                      weights=wts, matrix=run.matrix)
+    reach = ray_reach_px(run.cfg, run.phi + fit.zernike, used)
+    if reach > 2 * opts.max_shift_px:  # rays twice as far as any shift measured: a divergence
+        run.rejected = reach
+        return
     run.fits.append(fit.residual_rms)
     run.history.append(zernike_rms(fit.zernike, opts.modes))
     run.phi = run.phi + fit.zernike
@@ -320,6 +327,17 @@ def _update(run: _Run) -> None:
     run.shifts = np.nan_to_num(s_full)
     if opts.method == "geometric":
         run.total = run.total + np.where(used[..., None], run.shifts - fit.tilt, 0.0)
+
+
+def _warn_rejected(run: _Run) -> None:
+    """One warning: the last update was refused (its rays reach beyond twice the largest view
+    shift DAO measures), the estimate stays at the updates before it."""
+    import warnings
+
+    warnings.warn(f"DAO stopped after {len(run.history)} update(s): the next estimate's rays "
+                  f"would reach {run.rejected:.0f} px, beyond twice the largest shift measured "
+                  f"({run.opts.max_shift_px:g} px); the estimate so far is kept",
+                  RuntimeWarning, stacklevel=3)
 
 
 def _options(options: DaoOptions | None, settings: dict) -> DaoOptions:
@@ -374,6 +392,9 @@ def run_dao(block_views, cfg: SystemConfig, options: DaoOptions | None = None, *
         run.say = lambda text: bar.set_postfix_str(text, refresh=True)
         for _ in range(opts.max_iter):
             _update(run)
+            if run.rejected:
+                _warn_rejected(run)
+                break
             bar.set_postfix_str(f"update {run.history[-1]:.3f} λ, wavefront "
                                 f"{zernike_rms(run.phi, opts.modes):.3f} λ r.m.s.", refresh=False)
             bar.update(1)
