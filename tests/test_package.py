@@ -75,14 +75,15 @@ def test_cli_commands_refuse_to_overwrite_their_input(tmp_path):
 
 
 def test_cli_error_after_a_progress_bar_starts_its_own_line():
-    # a command that fails mid-progress: the bar is closed first, the error is its own line
+    # a command that fails mid-progress: its bar (a context, as every bar of the package) is
+    # closed first, the error is its own line
     code = ("import sys\n"
             "from tqdm import tqdm\n"
             "import metasensor.cli as cli\n"
             "def boom(**_):\n"
-            "    bar = tqdm(total=10, desc='work')\n"
-            "    bar.update(3)\n"
-            "    raise ValueError('views hold NaN')\n"
+            "    with tqdm(total=10, desc='work') as bar:\n"
+            "        bar.update(3)\n"
+            "        raise ValueError('views hold NaN')\n"
             "cli.app = boom\n"
             "cli.main()\n")
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)

@@ -108,17 +108,11 @@ def _root(
 
 
 def _fail(message: str, code: int) -> None:
-    """Close progress bars a failing command left open (so the error starts its own line, not
-    the bar's), print ``error: message`` to stderr and exit with ``code``."""
+    """Print ``error: message`` to stderr and exit with ``code``. Every progress bar is a
+    context manager (or an iteration) in the code that opened it, so a failing command has
+    closed its bars, and the error starts its own line, before it gets here."""
     import sys
 
-    try:
-        from tqdm import tqdm
-
-        for bar in list(getattr(tqdm, "_instances", ())):
-            bar.close()
-    except Exception:  # pragma: no cover - tqdm missing or a bar already torn down
-        pass
     typer.echo(f"error: {message}", err=True)
     sys.exit(code)
 

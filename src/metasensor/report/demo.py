@@ -215,7 +215,7 @@ def _simulate_both(scene: np.ndarray, cfg: SystemConfig, fz_sensor, s: DemoSetti
                    field_blocks=s.field_blocks, focus_offset=s.focus_offset)
     steps.update()
     steps.set_postfix_str("simulating the plain light-field camera")
-    lf = simulate(scene, cfg.replace(scan=1), field_zernike=fz_sensor, snr_db=s.snr_db,
+    lf = simulate(scene, cfg, scan=1, field_zernike=fz_sensor, snr_db=s.snr_db,
                   seed=s.seed + 1, comparison=False, field_blocks=s.field_blocks,
                   focus_offset=s.focus_offset)
     steps.update()
@@ -251,10 +251,6 @@ def run_demo(out: str | Path, settings: DemoSettings | None = None, progress: bo
 
     from tqdm.auto import tqdm
 
-    from metasensor.report.html import write_html_report
-    from metasensor.simulation.lens import SingleLens
-    from metasensor.simulation.scenes import load_scene
-
     s = settings or DemoSettings()
     _check_settings(s)
     notes = demo_warnings(s)
@@ -263,7 +259,15 @@ def run_demo(out: str | Path, settings: DemoSettings | None = None, progress: bo
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     t_start = time.perf_counter()
-    steps = tqdm(total=5, desc="demo", disable=not progress)
+    with tqdm(total=5, desc="demo", disable=not progress) as steps:  # closed on any error too
+        return _demo_steps(out, s, notes, steps, t_start)
+
+
+def _demo_steps(out: Path, s: DemoSettings, notes: list[str], steps, t_start: float) -> dict:
+    """:func:`run_demo`'s work under its progress bar ``steps``."""
+    from metasensor.report.html import write_html_report
+    from metasensor.simulation.lens import SingleLens
+    from metasensor.simulation.scenes import load_scene
 
     lens = SingleLens(strength=s.lens_strength)
     cfg = lens.config(SystemConfig(scan=s.scan))
@@ -303,5 +307,4 @@ def run_demo(out: str | Path, settings: DemoSettings | None = None, progress: bo
     atomic_write_text(out / "summary.json", json.dumps(summary, indent=2, default=float))
     write_html_report(out / "index.html", summary)
     steps.update()
-    steps.close()
     return summary

@@ -198,39 +198,38 @@ def simulate(scene, cfg: SystemConfig, zernike=None, field_zernike=None, depth=N
     seeds = np.random.SeedSequence(int(seed)).spawn(4)
     plan = _plan(inp, field_zernike, depth, settings, dev, seeds)
     # progress at the steps a person waits on (the PSF banks show their own bar on a terminal)
-    steps = tqdm(total=3 if comparison else 2, desc="simulate", unit="step",
-                 disable=not progress)
-    steps.set_postfix_str(f"views: {len(plan.comps)} PSF bank(s)")
-    clean = clean_views(inp.scene, inp, plan, progress)
-    reference = inp.scene if motion is None else motion.reference_scene(inp.scene)
-    if scale is None:
-        peak = float(clean.max())
-        scale = exposure * (2**inp.cfg.bit_depth - 1) / peak if peak > 0 else 1.0
-    clean *= np.float32(scale)
-    steps.update()
-    steps.set_postfix_str("noise and raw frames")
-    frames, views, model = _raw(inp, clean, settings, seeds[0])
-    o = inp.cfg.field_offset_px
-    (ly, lx), n = inp.lenslets, inp.cfg.nnum
-    truth = (reference[o:o + ly * n, o:o + lx * n] * np.float32(scale)).astype(np.float32)
-    options = {**settings, "zernike": inp.zernike, "field_zernike": field_zernike,
-               "depth": depth, "bit_depth": inp.cfg.bit_depth, "ao_segments": ao_segments,
-               "device": device}
-    for name in ("snr_db", "photons", "scale"):  # given per call, not kept with the capture
-        options.pop(name)
-    cap = Capture(frames=frames, views=views, views_clean=clean, truth=truth,
-                  zernike=_true_zernike(inp, plan.grid), sensor2d=None, hardware_ao=None,
-                  config=inp.cfg, scan_order=inp.order, noise=model, scale=float(scale),
-                  snr_db=measure_snr(clean, views), offset=o, field_zernike=plan.grid,
-                  depth_planes=None if depth is None else plan.planes,
-                  phase_screens=plan.screens, options=options)
-    steps.update()
-    if comparison:
-        steps.set_postfix_str("2D sensor and hardware AO")
-        comparison_sensors(cap, reference, plan, inp.zernike, field_zernike, ao_segments, seeds)
+    with tqdm(total=3 if comparison else 2, desc="simulate", unit="step",
+              disable=not progress) as steps:  # closed on any error too
+        steps.set_postfix_str(f"views: {len(plan.comps)} PSF bank(s)")
+        clean = clean_views(inp.scene, inp, plan, progress)
+        reference = inp.scene if motion is None else motion.reference_scene(inp.scene)
+        if scale is None:
+            peak = float(clean.max())
+            scale = exposure * (2**inp.cfg.bit_depth - 1) / peak if peak > 0 else 1.0
+        clean *= np.float32(scale)
         steps.update()
-    steps.close()
-    return cap
+        steps.set_postfix_str("noise and raw frames")
+        frames, views, model = _raw(inp, clean, settings, seeds[0])
+        o = inp.cfg.field_offset_px
+        (ly, lx), n = inp.lenslets, inp.cfg.nnum
+        truth = (reference[o:o + ly * n, o:o + lx * n] * np.float32(scale)).astype(np.float32)
+        options = {**settings, "zernike": inp.zernike, "field_zernike": field_zernike,
+                   "depth": depth, "bit_depth": inp.cfg.bit_depth, "ao_segments": ao_segments,
+                   "device": device}
+        for name in ("snr_db", "photons", "scale"):  # given per call, not kept with the capture
+            options.pop(name)
+        cap = Capture(frames=frames, views=views, views_clean=clean, truth=truth,
+                      zernike=_true_zernike(inp, plan.grid), sensor2d=None, hardware_ao=None,
+                      config=inp.cfg, scan_order=inp.order, noise=model, scale=float(scale),
+                      snr_db=measure_snr(clean, views), offset=o, field_zernike=plan.grid,
+                      depth_planes=None if depth is None else plan.planes,
+                      phase_screens=plan.screens, options=options)
+        steps.update()
+        if comparison:
+            steps.set_postfix_str("2D sensor and hardware AO")
+            comparison_sensors(cap, reference, plan, inp.zernike, field_zernike, ao_segments, seeds)
+            steps.update()
+        return cap
 
 
 def replace(cap: Capture, **changes) -> Capture:

@@ -105,9 +105,9 @@ def clean_views(scene: np.ndarray, inp, plan: RenderPlan, progress: bool) -> np.
     views = torch.zeros((n * n, ly * p, lx * p), dtype=torch.float32, device=dev)
     if motion is None and screens is None:
         rows, cols = Lattice(n // 2, d, ly * p), Lattice(n // 2, d, lx * p)
-        accumulate(scene, tqdm(comps, desc="views", disable=not progress),
-                   lambda cp: banks.views(add_zernike(cp.zernike, focus), cp.depth), rows, cols,
-                   views, dev)
+        with tqdm(comps, desc="views", disable=not progress) as shown:  # closed on any error
+            accumulate(scene, shown, lambda cp: banks.views(add_zernike(cp.zernike, focus),
+                                                            cp.depth), rows, cols, views, dev)
     else:
         for t, (r, c) in enumerate(tqdm(inp.order, desc="frames", disable=not progress)):
             img = scene if motion is None else motion.scene_at(scene, t - plan.tref)
