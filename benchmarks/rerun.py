@@ -2,11 +2,12 @@
 
 ``python benchmarks/rerun.py scan_period`` (with ``SCAN_PERIOD_BUDGETS`` / ``SCAN_PERIOD_FOCUS``)
 or ``python benchmarks/rerun.py ed_fig4`` (with ``ED_FIG4_LEVELS``; the cases are measured
-afresh in a temporary cases file) runs the benchmark's ``run()`` on the current code, replaces
-the committed rows it re-measured (same key: every setting of the row), marks them
-``"remeasured": True``, keeps the old figures as ``"previous"`` ({metric: value}) for the
-comparison, recomputes the benchmark's summary rows over the merged rows, redraws its figure and
-rewrites ``results/<name>.json``. Rows the re-run did not reach stay as they were (unmarked).
+afresh in a temporary cases file, or in ``ED_FIG4_CASES`` if set, which a repeated run
+resumes) runs the benchmark's ``run()`` on the current code, replaces the committed rows it
+re-measured (same key: every setting of the row), marks them ``"remeasured": True``, keeps the
+old figures as ``"previous"`` ({metric: value}) for the comparison, recomputes the benchmark's
+summary rows over the merged rows, redraws its figure and rewrites ``results/<name>.json``.
+Rows the re-run did not reach stay as they were (unmarked).
 """
 
 from __future__ import annotations
@@ -72,7 +73,7 @@ def main(name: str) -> int:
     old = json.loads(path.read_text())
     t0 = time.perf_counter()
     with tempfile.TemporaryDirectory() as tmp:
-        if name == "ed_fig4":
+        if name == "ed_fig4" and not os.environ.get("ED_FIG4_CASES"):  # else: resume that file
             os.environ["ED_FIG4_CASES"] = str(Path(tmp) / "cases.jsonl")
         new_rows = module.run(quick=False)
     rows = merge(old["rows"], new_rows, spec["key"], spec["metrics"])
