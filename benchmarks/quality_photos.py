@@ -103,7 +103,7 @@ def refresh_restored(rows: list[dict]) -> list[dict]:
     grid = list(bq.HL_LAMBDAS)
     stale = {_key(r) for r in rows if r["image"].startswith("2D+prior")
              and r.get("lam_grid") != grid}
-    for k in sorted(stale, key=str):
+    for k in sorted(stale, key=lambda k: (k[0] != "photos-focus", k[2], PHOTOS.index(k[1]))):
         study, name, rms, off, _ = k
         same = [r for r in rows if _key(r) == k]
         key = {c: same[0][c] for c in ("study", "scene", "truth_px", "focus_offset_waves",
