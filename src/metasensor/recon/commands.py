@@ -156,8 +156,9 @@ def _say_dao(args: ReconstructArgs, inputs) -> None:
 
 
 def run_reconstruct(args: ReconstructArgs) -> None:
-    """Reconstruct the all-in-focus image from views (ISA; multisite blocks through Dask). By
-    default the aberration is estimated per block (DAO), as the paper does, unless a system
+    """Reconstruct the all-in-focus image from views (ISA; multisite blocks through Dask).
+
+    By default the aberration is estimated per block (DAO), as the paper does, unless a system
     calibration or an aberration is given; --dao none skips the estimate.
 
     Example: metasensor reconstruct cap/views.tif --blocks 4x4 --out result/
