@@ -186,8 +186,8 @@ def run(studies=("aberrated", "focus", "solver")) -> list[dict]:
     if "focus" in studies:
         plan += [("photos-focus", n, 0.0, off) for off in OFFSETS[::-1] for n in PHOTOS]
     if "solver" in studies:
-        plan += [("photos-solver", n, 0.0, 0.0, lam) for lam in LAM_SCALES
-                 for n in SOLVER_SCENES]
+        plan += [("photos-solver", n, 0.0, 0.0, lam) for n in SOLVER_SCENES
+                 for lam in LAM_SCALES]
     for study, name, rms, off, *lam in plan:
         if (study, name, rms, off, *(lam or [None])) in done:
             continue
