@@ -143,7 +143,22 @@ def make_geometry(window: tuple[int, int], d: int, radius: int, pad: bool = True
     return Geometry((sy, sx), d, (lead, lead), (my, mx))
 
 
-class PhaseSpaceOperator:
+class GridShapes:
+    """``domain_shape`` and ``range_shape`` of a phase-space operator from its ``geometry`` and
+    ``n_views`` (shared by every operator on a :class:`Geometry`)."""
+
+    @property
+    def domain_shape(self) -> tuple[int, int]:
+        """Shape ``(Ny, Nx)`` of the images A applies to."""
+        return self.geometry.domain
+
+    @property
+    def range_shape(self) -> tuple[int, int, int]:
+        """Shape ``(V, My, Mx)`` of the view samples A returns."""
+        return (self.n_views, *self.geometry.grid)
+
+
+class PhaseSpaceOperator(GridShapes):
     """The linear map A: domain image (Ny, Nx) -> view samples (V, My, Mx), and its adjoint.
 
     The one owner of the phase-space model: every solver (:mod:`metasensor.solvers`), the
@@ -189,16 +204,6 @@ class PhaseSpaceOperator:
         my, mx = geometry.grid
         self._cols = torch.arange(nx // 2 + 1, device=self.device) % mx
         self.psf_sums = psf_t.sum(dim=(-2, -1))
-
-    @property
-    def domain_shape(self) -> tuple[int, int]:
-        """Shape ``(Ny, Nx)`` of the images A applies to."""
-        return self.geometry.domain
-
-    @property
-    def range_shape(self) -> tuple[int, int, int]:
-        """Shape ``(V, My, Mx)`` of the view samples A returns."""
-        return (self.n_views, *self.geometry.grid)
 
     # ------------------------------------------------------------------ setup
     def _otfs(self, psf: torch.Tensor) -> torch.Tensor:
@@ -375,13 +380,6 @@ class PhaseSpaceOperator:
     def norm(self, iterations: int = 30, seed: int = 0) -> float:
         """The operator norm ‖A‖₂ (largest singular value), by power iteration on AᵀA from a
         seeded random image; ``iterations`` products (relative error ~ (λ₂/λ₁)^iterations)."""
-        gen = torch.Generator(device="cpu").manual_seed(int(seed))
-        x = torch.rand(self.domain_shape, generator=gen).to(self.device)
-        value = 0.0
-        for _ in range(max(int(iterations), 1)):
-            x = self.adjoint(self.forward(x))
-            value = float(torch.linalg.vector_norm(x))
-            if value == 0.0:
-                return 0.0
-            x = x / value
-        return math.sqrt(value)
+        from metasensor.phasespace.dottest import power_norm
+
+        return power_norm(self, iterations, seed)

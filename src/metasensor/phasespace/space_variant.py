@@ -31,12 +31,10 @@ Hand-written: no library has the sampled phase-space operator.
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 import torch
 
-from metasensor.phasespace.operator import Geometry, PhaseSpaceOperator
+from metasensor.phasespace.operator import Geometry, GridShapes, PhaseSpaceOperator
 
 __all__ = ["SpaceVariantOperator", "corner_weights", "pad_banks"]
 
@@ -86,7 +84,7 @@ def corner_weights(geometry: Geometry, window_origin: tuple[int, int],
     return np.stack([np.outer(wy[a], wx[b]) for a in (0, 1) for b in (0, 1)]).astype(np.float32)
 
 
-class SpaceVariantOperator:
+class SpaceVariantOperator(GridShapes):
     """``A x = Σ_f A_f (w_f · x)``: PSF banks blended by a partition of unity (module docstring).
 
     Parameters
@@ -136,14 +134,6 @@ class SpaceVariantOperator:
         self.psf = torch.as_tensor(mean_bank, device=self.device)
         self._mean_op: PhaseSpaceOperator | None = None
         self.psf_sums = self.psf.sum(dim=(-2, -1))
-
-    @property
-    def domain_shape(self) -> tuple[int, int]:
-        return self.geometry.domain
-
-    @property
-    def range_shape(self) -> tuple[int, int, int]:
-        return (self.n_views, *self.geometry.grid)
 
     def samples_and_mask(self, data, mask):
         """As :meth:`PhaseSpaceOperator.samples_and_mask`."""
@@ -222,13 +212,6 @@ class SpaceVariantOperator:
 
     def norm(self, iterations: int = 30, seed: int = 0) -> float:
         """‖A‖₂ by power iteration on AᵀA from a seeded random image."""
-        gen = torch.Generator(device="cpu").manual_seed(int(seed))
-        x = torch.rand(self.domain_shape, generator=gen).to(self.device)
-        value = 0.0
-        for _ in range(max(int(iterations), 1)):
-            x = self.adjoint(self.forward(x))
-            value = float(torch.linalg.vector_norm(x))
-            if value == 0.0:
-                return 0.0
-            x = x / value
-        return math.sqrt(value)
+        from metasensor.phasespace.dottest import power_norm
+
+        return power_norm(self, iterations, seed)
