@@ -28,6 +28,27 @@ def run_cli(*args) -> tuple[int, str]:
     return code, err.getvalue()
 
 
+_CHILD = r"""
+import json, sys, time
+sys.path.insert(0, {helpers!r})
+{limit}
+from cli_helpers import run_cli
+results = []
+for args in json.loads(sys.argv[1]):
+    t0 = time.monotonic()
+    code, err = run_cli(*args)
+    results.append([code, err, time.monotonic() - t0])
+print(json.dumps(results))
+"""
+
+
+def capped_cli_script(limit: str) -> str:
+    """Source for ``python -c``: run the Python statements ``limit`` (a resource limit, set
+    before the package is imported), then every ``metasensor ARGS`` of the JSON list in
+    ``argv[1]`` through :func:`run_cli`; prints ``[[status, stderr, seconds], ...]`` as JSON."""
+    return _CHILD.format(helpers=str(Path(__file__).resolve().parent), limit=limit)
+
+
 def refused(*args, match: str) -> str:
     """Assert ``metasensor ARGS`` exits 2 with one ``error:`` line containing ``match``."""
     code, err = run_cli(*args)

@@ -13,30 +13,15 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from cli_helpers import capped_cli_script
 
 import metasensor as ms
 from metasensor.io.raw import write_raw
 from metasensor.io.views import write_views
 
-SCRIPT = r"""
-import io, json, resource, signal, sys
-from contextlib import redirect_stderr, redirect_stdout
-signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
-resource.setrlimit(resource.RLIMIT_FSIZE, (20000, 20000))
-from metasensor.cli import main
-results = []
-for args in json.loads(sys.argv[1]):
-    sys.argv = ["metasensor", *args]
-    err = io.StringIO()
-    try:
-        with redirect_stderr(err), redirect_stdout(io.StringIO()):
-            main()
-        code = 0
-    except SystemExit as exc:
-        code = exc.code
-    results.append([code, err.getvalue()])
-print(json.dumps(results))
-"""
+SCRIPT = capped_cli_script(  # writes past 20,000 bytes fail with EFBIG, not a signal
+    "import resource, signal; signal.signal(signal.SIGXFSZ, signal.SIG_IGN); "
+    "resource.setrlimit(resource.RLIMIT_FSIZE, (20000, 20000))")
 
 
 @pytest.mark.slow  # an interpreter computing a PSF bank under a file-size limit
@@ -57,7 +42,7 @@ def test_a_full_disk_is_one_line_naming_the_file(tmp_path):
                             "PYTHONDONTWRITEBYTECODE": "1",  # no .pyc cut short by the limit
                             "OMP_NUM_THREADS": "1"})
     assert p.returncode == 0, p.stderr[-2000:]
-    for (code, err), args in zip(json.loads(p.stdout), cases, strict=True):
+    for (code, err, _), args in zip(json.loads(p.stdout), cases, strict=True):
         lines = [ln for ln in err.splitlines() if ln.startswith("error:")]  # not the progress
         assert code == 2 and len(lines) == 1 and err.strip().endswith(lines[0]), (args, err)
         assert lines[0].startswith(f"error: cannot write {args[-1]}: "), err

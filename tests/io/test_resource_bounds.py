@@ -14,31 +14,15 @@ import sys
 from pathlib import Path
 
 import numpy as np
+from cli_helpers import capped_cli_script
 
 import metasensor as ms
 from metasensor.io.views import write_views
 
 CFG = ms.SystemConfig(nnum=3, mla_pitch=3 * 4.6e-6, mla_focal=3 * 46e-6, scan=3)
 CAP_BYTES = 3 * 2**30  # the interpreter with torch imported maps about 0.7 GB
-SCRIPT = r"""
-import io, json, resource, sys, time
-from contextlib import redirect_stderr, redirect_stdout
-resource.setrlimit(resource.RLIMIT_AS, (int(sys.argv[2]), int(sys.argv[2])))
-from metasensor.cli import main
-results = []
-for args in json.loads(sys.argv[1]):
-    sys.argv = ["metasensor", *args]
-    err = io.StringIO()
-    t0 = time.monotonic()
-    try:
-        with redirect_stderr(err), redirect_stdout(io.StringIO()):
-            main()
-        code = 0
-    except SystemExit as exc:
-        code = exc.code
-    results.append([code, err.getvalue(), time.monotonic() - t0])
-print(json.dumps(results))
-"""
+SCRIPT = capped_cli_script(
+    "import resource; resource.setrlimit(resource.RLIMIT_AS, (int(sys.argv[2]),) * 2)")
 
 
 def _toml(path: Path, **change) -> Path:
