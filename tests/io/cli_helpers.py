@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import hashlib
 import io
+import signal
 import sys
 from contextlib import redirect_stderr, redirect_stdout
 from pathlib import Path
@@ -65,3 +66,12 @@ def tree_digest(root: Path) -> dict[str, str]:
         return {".": hashlib.sha256(root.read_bytes()).hexdigest()}
     return {str(p.relative_to(root)): hashlib.sha256(p.read_bytes()).hexdigest()
             for p in sorted(root.rglob("*")) if p.is_file()}
+
+
+def as_at_a_terminal() -> None:
+    """``preexec_fn`` for a child a test stops with Ctrl-C: SIGINT and SIGTERM at their default
+    disposition, as for a command typed at a terminal. A test run launched in the background of
+    a non-interactive shell inherits SIGINT ignored, its children with it, and an interpreter
+    started so keeps ignoring Ctrl-C (as POSIX shells expect)."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)

@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from cli_helpers import as_at_a_terminal
 
 import metasensor as ms
 from metasensor.io.raw import write_raw
@@ -38,7 +39,8 @@ def test_sigterm_and_ctrl_c_stop_a_command_cleanly(tmp_path):
         (tmp_path / out).parent.mkdir(exist_ok=True)
         proc = subprocess.Popen([sys.executable, "-m", "metasensor.cli", "realign", "raw.tif",
                                  "--out", out], cwd=tmp_path, env=env, text=True,
-                                stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                preexec_fn=as_at_a_terminal)  # not inherited as ignored
         runs.append((sig, out, proc))
     pending = list(runs)
     t0 = time.monotonic()
@@ -115,3 +117,18 @@ def test_zarr_threads_leave_ctrl_c_to_the_main_thread(tmp_path):
     main, zarr_io = json.loads(out.stdout)
     stop = (1 << (signal.SIGINT - 1)) | (1 << (signal.SIGTERM - 1))
     assert main & stop == 0 and zarr_io & stop == stop, (main, zarr_io)
+
+
+def test_a_command_started_with_ctrl_c_ignored_keeps_ignoring_it():
+    """A command started in the background of a script (or under nohup) inherits SIGINT
+    ignored and keeps it so; SIGTERM still stops it cleanly."""
+    from metasensor.io.interrupt import handle_termination
+
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        with handle_termination():
+            assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN
+            assert callable(signal.getsignal(signal.SIGTERM))  # the clean stop
+        assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN
+    finally:
+        signal.signal(signal.SIGINT, previous)

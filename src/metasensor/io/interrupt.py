@@ -14,7 +14,8 @@ Three measures, hand-written (no library covers them):
   swallow the first one, the write still stops before it puts its output in place (an
   interrupt the caller caught before the write began does not stop later writes).
 - Commands (:func:`handle_termination`) treat SIGTERM like Ctrl-C: :class:`Terminated`, a
-  ``KeyboardInterrupt``, so the same cleanup paths remove every temporary.
+  ``KeyboardInterrupt``, so the same cleanup paths remove every temporary. A signal the process
+  inherited as ignored (a background job of a script, ``nohup``) stays ignored.
 """
 
 from __future__ import annotations
@@ -61,13 +62,19 @@ def watch() -> int:
 @contextlib.contextmanager
 def handle_termination() -> Iterator[None]:
     """Commands: inside the block, Ctrl-C and SIGTERM raise (:class:`Terminated` for SIGTERM)
-    and are recorded; the handlers before it are restored after it."""
+    and are recorded; the handlers before it are restored after it.
+
+    A signal the process was started with ignored stays ignored, as POSIX shells expect: a
+    command started in the background of a script (``metasensor ... &``), or under ``nohup``,
+    inherits Ctrl-C ignored so that a Ctrl-C meant for the script does not stop it.
+    """
     if not _main_thread():
         yield
         return
     old = {sig: signal.getsignal(sig) for sig in _STOP}
     for sig in _STOP:
-        signal.signal(sig, _on_signal)
+        if old[sig] is not signal.SIG_IGN:
+            signal.signal(sig, _on_signal)
     try:
         yield
     finally:
