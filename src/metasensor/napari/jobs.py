@@ -127,13 +127,14 @@ class Job:
         return self._cancelled.is_set()
 
     def cancel(self) -> None:
-        """Interrupt the running command (SIGINT, as Ctrl-C would: it cleans up after itself;
+        """Stop the running command (SIGTERM, which commands take as Ctrl-C: it cleans up after
+        itself; unlike Ctrl-C it is not ignored when the viewer was started as a background job;
         :meth:`steps` ends it if it has not stopped 5 s later and removes the partial output)."""
         self._cancelled.set()
         self._cancel_time = time.monotonic()
         proc = self._proc
         if proc is not None and proc.poll() is None:
-            proc.send_signal(signal.SIGINT)
+            proc.send_signal(signal.SIGTERM)
 
     def steps(self) -> Iterator[Progress]:
         """Generator: run the command; yields progress; returns the JobResult."""
@@ -148,7 +149,7 @@ class Job:
                 [self.python, "-m", "metasensor.cli", *argv], stdout=subprocess.PIPE,
                 stderr=subprocess.PIPE, stdin=subprocess.DEVNULL)
             if self.cancelled:  # cancelled while the process started
-                self._proc.send_signal(signal.SIGINT)
+                self._proc.send_signal(signal.SIGTERM)
             out_text: list[str] = []
             readers = [threading.Thread(target=_pump, args=(self._proc.stderr, chunks),
                                         daemon=True),
@@ -162,7 +163,7 @@ class Job:
                     chunk = chunks.get(timeout=0.1)
                 except queue.Empty:
                     if self.cancelled and time.monotonic() - self._cancel_time > 5.0:
-                        self._proc.kill()  # did not stop on SIGINT
+                        self._proc.kill()  # did not stop on SIGTERM
                     yield None  # a chance to quit for the worker; no news
                     continue
                 if chunk is None:
