@@ -7,7 +7,10 @@ Pipeline (the paper's Fig. 6 and Methods, "Depth estimation"):
    shift maps (``calibration``) so that only the parallax is left.
 2. Plane sweep: a cost volume over ``candidates`` disparities (variance of the aligned views, or
    SAD to the centre view; optional half-pupil occlusion handling), each slice aggregated by a
-   guided filter steered by the centre view (edge-aware cost-volume filtering, Hosni et al. 2013).
+   guided filter steered by the centre view (edge-aware cost-volume filtering, Hosni et al. 2013)
+   and, by default, the per-pixel costs also regularised by semi-global matching
+   (``metasensor.depth.sgm``, Hirschmüller 2008), which decides at depth edges and thin
+   structures (where the two disagree by more than ``AGREE_PX`` at the outermost view).
 3. Winner-take-all with a parabola fit, a peak-ratio confidence, then Gauss–Newton refinement of
    the disparity on the views themselves (continuous, no candidate grid).
 4. Optional confidence-weighted, edge-aware filling of low-confidence pixels.
@@ -17,8 +20,9 @@ Pipeline (the paper's Fig. 6 and Methods, "Depth estimation"):
 
 Written here by hand (no maintained Python library does plane-sweep stereo over a light-field
 view grid); the pieces follow the light-field literature as cited in each module. Memory: the
-used views twice (input copy, padded copy), the cost volume ``(candidates, H, W)`` float32 and a
-few ``(9, H, W)`` accumulators (``(candidates + 2·V + 9) · H · W · 4`` bytes for V views).
+used views twice (input copy, padded copy), the cost volume ``(candidates, H, W)`` float32 (twice
+with semi-global matching) and a few ``(9, H, W)`` accumulators
+(``(2·candidates + 2·V + 9) · H · W · 4`` bytes for V views).
 Speed: ``benchmarks/bench_depth.py`` (figures in ``docs/decisions.md``).
 """
 
@@ -43,6 +47,7 @@ from metasensor.depth.refine import (
     peak_ratio_confidence,
     subpixel_minimum,
 )
+from metasensor.depth.sgm import SemiGlobal, normalise_costs, semi_global
 from metasensor.depth.span import measure_span, saturation
 
 __all__ = ["DepthResult", "estimate_depth"]
@@ -52,6 +57,7 @@ MAX_CANDIDATES = 1024  # plane-sweep disparities, at most
 MIN_CANDIDATES = 64  # the automatic candidate count, at least
 OUTER_STEP = 0.5  # automatic candidate spacing: the outermost view moves this many view px
 COARSE_SATURATED = 0.01  # the same for the coarse search
+AGREE_PX = 2.0  # window and semi-global estimates agree: outermost views within this [view px]
 SATURATED = 0.001  # share of confident pixels on an end of the span that widens or warns
 
 
@@ -61,7 +67,8 @@ class DepthResult:
 
     disparity : float32, view pixels per view step; view (u, v) content at
         ``p + disparity · (u − c, v − c)`` equals the centre view's at ``p``.
-    confidence : float32 in [0, 1] (peak ratio of the aggregated cost curve).
+    confidence : float32 in [0, 1] (peak ratio of the cost curve that decided the pixel:
+        window-aggregated or semi-global).
     image_depth : float32 metres, image-side depth ``z = disparity · d · mla_focal`` (``z > 0``:
         focused in front of the MLA, towards the main lens; d = nnum // scan).
     object_distance : float32 metres from the main lens (thin lens), or ``None`` without
@@ -119,8 +126,11 @@ def _check_views(views, cfg: SystemConfig) -> np.ndarray:
 
 
 def _check_settings(cfg, arr, candidates, radius, refine_iterations, refine_radius, fill_radius,
-                    eps, disparity_range, view_mask) -> np.ndarray:
+                    eps, disparity_range, view_mask, smoothing=None) -> np.ndarray:
     """Validate the settings (one-line errors); returns the boolean view mask."""
+    if smoothing is not None and not isinstance(smoothing, SemiGlobal):
+        raise TypeError(f"smoothing must be a SemiGlobal or None, got "
+                        f"{type(smoothing).__name__}")
     n, c = cfg.nnum, cfg.center
     side = max(arr.shape[2:])
     # upper bounds: windows beyond the view, and sweeps finer than 1/1000 of the range (a cost
@@ -179,18 +189,47 @@ def _candidates(span, candidates: int | None, amax: float) -> np.ndarray:
     return geometry.disparity_candidates(span, candidates)
 
 
-def _sweep(stack, au, av, centre, cands, gf, cost, occlusion, progress):
+def _sweep(stack, au, av, centre, cands, gf, cost, occlusion, penalties, progress):
     """Plane sweep + winner-take-all: ``(disparity, winner index, confidence, saturation
-    (low, high), sweep)``."""
+    (low, high), sweep)``; without ``penalties`` from the window-aggregated costs (guided filter
+    ``gf``), with them as :func:`_decide` says."""
     sweep = CostVolume(stack, au, av, centre, float(np.abs(cands).max()), cost=cost,
                        occlusion=occlusion)
-    vol = sweep.volume(cands, aggregate=gf, progress=progress)
-    disp, idx = subpixel_minimum(vol, cands)
-    conf = peak_ratio_confidence(vol, idx)
     # saturation is judged over the disparity change that moves the outermost view by a pixel
     amax = float(max(np.abs(au).max(), np.abs(av).max()))
     steps = int(min(len(cands) // 4, max(3, math.ceil(1.0 / (amax * (cands[1] - cands[0]))))))
-    return disp, idx, conf, saturation(vol, idx, steps=steps), sweep
+    if penalties is None:
+        vol = sweep.volume(cands, aggregate=gf, progress=progress)
+        disp, idx = subpixel_minimum(vol, cands)
+        return (disp, idx, peak_ratio_confidence(vol, idx), saturation(vol, idx, steps=steps),
+                sweep)
+    return (*_decide(sweep.volume(cands, progress=progress), cands, gf, penalties, amax, steps),
+            sweep)
+
+
+def _decide(vol, cands, gf, penalties: SemiGlobal, amax: float, steps: int):
+    """Window aggregation and semi-global matching of the per-pixel costs ``vol`` (overwritten):
+    ``(disparity, winner index, confidence, saturation)``.
+
+    Where the semi-global estimate moves the outermost view by at most ``AGREE_PX`` view px (or
+    one candidate) from the window's, the window's (smoother, sub-candidate) estimate is kept;
+    elsewhere (depth edges, thin structures: the window's estimate spreads the background over
+    them) the semi-global one. The confidence is the peak ratio of the curve that decided."""
+    scale = normalise_costs(vol)
+    total = semi_global(vol, penalties)
+    d_sgm, i_sgm = subpixel_minimum(total, cands)
+    c_sgm = peak_ratio_confidence(total, i_sgm)
+    sat_sgm = saturation(total, i_sgm, steps=steps)
+    del total
+    vol.mul_(scale)  # back to the plain costs
+    for k in range(vol.shape[0]):
+        vol[k] = gf(vol[k])
+    disp, idx = subpixel_minimum(vol, cands)
+    sat = tuple(max(a, b) for a, b in zip(saturation(vol, idx, steps=steps), sat_sgm,
+                                           strict=True))
+    agree = (disp - d_sgm).abs() <= max(AGREE_PX / amax, float(cands[1] - cands[0]))
+    conf = torch.where(agree, peak_ratio_confidence(vol, idx), c_sgm)
+    return torch.where(agree, disp, d_sgm), torch.where(agree, idx, i_sgm), conf, sat
 
 
 def _widened(span, limit, low: float, high: float):
@@ -211,6 +250,7 @@ def estimate_depth(views, cfg: SystemConfig, calibration=None, *, candidates: in
                    refine_iterations: int = 2, refine_radius: int | None = None,
                    fill: bool = True, fill_threshold: float = 0.1,
                    fill_radius: int = 16, normalize: bool = True,
+                   smoothing: SemiGlobal | None = SemiGlobal(),
                    focal_length: float | None = None, focus_distance: float | None = None,
                    device=None, progress: bool = False) -> DepthResult:
     """Disparity, confidence and depth from views ``(nnum, nnum, H, W)`` (or a ``Capture``).
@@ -232,13 +272,16 @@ def estimate_depth(views, cfg: SystemConfig, calibration=None, *, candidates: in
         only), aggregated over ``refine_radius`` (None: ``radius``). ``fill``: replace pixels
         with confidence below ``fill_threshold`` by an edge-aware, confidence-weighted average
         of the confident ones within ``fill_radius`` (``DepthResult.valid`` marks the others).
+    smoothing : :class:`metasensor.depth.sgm.SemiGlobal` penalties of the semi-global matching
+        that decides at depth edges and thin structures (default), or None: the window
+        aggregation alone.
     focal_length, focus_distance : main-lens geometry [m] overriding the config's.
     """
     if not isinstance(cfg, SystemConfig):
         raise TypeError(f"cfg must be a SystemConfig, got {type(cfg).__name__}")
     arr = _check_views(views, cfg)
     mask = _check_settings(cfg, arr, candidates, radius, refine_iterations, refine_radius,
-                           fill_radius, eps, disparity_range, view_mask)
+                           fill_radius, eps, disparity_range, view_mask, smoothing)
     n, c = cfg.nnum, cfg.center
     lens = geometry.main_lens_geometry(cfg, focal_length, focus_distance)
     shift_maps = resolve_shift_maps(calibration, n, arr.shape[2:])
@@ -267,7 +310,7 @@ def estimate_depth(views, cfg: SystemConfig, calibration=None, *, candidates: in
         while True:
             cands = _candidates(span, candidates, amax)
             disp, idx, conf, sat, sweep = _sweep(stack, au, av, centre, cands, gf, cost, occlusion,
-                                            progress)
+                                                 smoothing, progress)
             # the (mean-subtracted, padded) copy inside the sweep serves for the views from here
             del stack
             stack = sweep.views

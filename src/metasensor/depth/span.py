@@ -22,8 +22,8 @@ import numpy as np
 import torch
 
 from metasensor.depth.cost import CostVolume
-from metasensor.depth.filters import GuidedFilter
 from metasensor.depth.refine import peak_ratio_confidence, subpixel_minimum
+from metasensor.depth.sgm import normalise_costs, semi_global
 
 __all__ = ["MAX_SPAN", "SpanEstimate", "measure_span", "saturation"]
 
@@ -67,8 +67,8 @@ def measure_span(stack: torch.Tensor, au, av, centre: int, minimum: tuple[float,
 
     ``minimum``: a span the result always covers (e.g. a configuration's natural range), or
     None. ``given``: a span to check (``SpanEstimate.beyond``). The coarse sweep is the one of
-    :class:`CostVolume` (variance, half-pupil occlusion handling) with a guided-filter
-    aggregation of radius 2 coarse px.
+    :class:`CostVolume` (variance, half-pupil occlusion handling), each pixel's cost curve
+    normalised and regularised by :func:`metasensor.depth.sgm.semi_global`.
     """
     au = np.asarray(au, dtype=np.float64)
     av = np.asarray(av, dtype=np.float64)
@@ -80,10 +80,11 @@ def measure_span(stack: torch.Tensor, au, av, centre: int, minimum: tuple[float,
     step = 0.5 * f / amax
     k = int(np.ceil(reach / step))
     cands = np.arange(-k, k + 1, dtype=np.float64) * step
-    gf = GuidedFilter(coarse[centre], radius=2, eps=0.01)
     with torch.no_grad():
         sweep = CostVolume(coarse, au, av, centre, reach / f, occlusion=occlusion)
-        vol = sweep.volume(cands / f, aggregate=gf)
+        vol = sweep.volume(cands / f)
+        normalise_costs(vol)
+        vol = semi_global(vol)
         disp, idx = subpixel_minimum(vol, cands)
         conf = peak_ratio_confidence(vol, idx)
         sat = sum(saturation(vol[:, 2:-2, 2:-2], idx[2:-2, 2:-2]))
