@@ -107,7 +107,9 @@ class SystemConfig:
     lenslet_aperture : ``"circular"`` (the coded aperture, default) or ``"square"``.
     aperture_diameter : diameter of the circular lenslet aperture [m] (``None``: ``mla_pitch``).
     wavelength : centre wavelength [m].
-    na : image-side numerical aperture of the main lens, in (0, 1).
+    na : image-side numerical aperture of the main lens, in (0, 1). The pupil's image behind a
+        lenslet has diameter ``2 na mla_focal`` (:attr:`pupil_fill` pitches): above one pitch
+        (a main lens faster than the lenslets) its rim spills onto the neighbours' edge pixels.
     obstruction : central obstruction ratio of the pupil (0: clear; e.g. 0.3 for a Cassegrain).
     scan : scan period per axis (1 = plain light-field camera); must divide ``nnum`` when the
         MLA moves (``moving="mla"``); any period when the image moves over a fixed MLA.
@@ -295,6 +297,12 @@ class SystemConfig:
         if self.grid_points == self.nnum:
             return self.pixel_pitch
         return self.mla_pitch / self.grid_points
+
+    @property
+    def pupil_fill(self) -> float:
+        """Diameter of the pupil's image behind a lenslet over the pitch, ``2 NA f_ml / pitch``
+        (1 for the prototype: the image just fills the lenslet; above 1: cross-talk)."""
+        return 2.0 * self.na * self.mla_focal / self.mla_pitch
 
     @property
     def pupil_radius_px(self) -> float:
