@@ -6,7 +6,9 @@ from metasensor.motion.correct import (
     correct_motion_sequence,
     correct_motion_views,
     estimate_motion,
+    plan_motion,
 )
+from metasensor.motion.fallback import FallbackMap, FallbackOptions
 
 __all__ = ["correct_motion", "correct_motion_views", "correct_motion_sequence",
-           "estimate_motion", "MotionPlan"]
+           "estimate_motion", "plan_motion", "MotionPlan", "FallbackOptions", "FallbackMap"]

@@ -27,6 +27,7 @@ from scipy import ndimage
 
 from metasensor.motion.consistency import RESOLVED_MIN, dense_confidence, resolved_fraction
 from metasensor.motion.evidence import sample_evidence
+from metasensor.motion.fallback import FallbackMap, FallbackOptions, blend, fallback_map
 from metasensor.motion.flow import (
     FLOW_METHODS,
     _few_threads,
@@ -36,11 +37,11 @@ from metasensor.motion.flow import (
     registration_flows,
     suppress_static,
 )
-from metasensor.motion.scatter import ScatterInterpolator
+from metasensor.motion.plan import MotionPlan
 from metasensor.sensor.scan import check_scan_order, period_of
 
 __all__ = ["correct_motion", "correct_motion_views", "correct_motion_sequence",
-           "estimate_motion", "MotionPlan"]
+           "estimate_motion", "plan_motion", "MotionPlan"]
 
 
 def _resolve(scan_order, reference, shape) -> tuple[list[tuple[int, int]], int, int]:
@@ -74,6 +75,12 @@ def _check_options(scatter: str, threshold: float, smooth: float, method: str,
             raise ValueError(f"{name} must be a non-negative number, got {value!r}")
     if max_ratio is not None and not (isinstance(max_ratio, int | float) and 0 < max_ratio <= 1):
         raise ValueError(f"max_ratio must lie in (0, 1] (1 disables the test), got {max_ratio!r}")
+
+
+def _check_fallback(fallback) -> None:
+    if not isinstance(fallback, bool | FallbackOptions):
+        raise TypeError(f"fallback must be a bool or FallbackOptions, got "
+                        f"{type(fallback).__name__}")
 
 
 def _check_image(img, name: str) -> np.ndarray:
@@ -110,9 +117,11 @@ def estimate_motion(view: np.ndarray, scan_order, reference: int | None = None,
 
 
 def _motion_and_gain(view, scan_order, reference, method, threshold, smooth, max_ratio, grid,
-                     device, occlusion_tol, evidence) -> tuple[np.ndarray, np.ndarray | None]:
-    """Dense motion ``(2, H, W)`` and, with ``evidence``, the brightness of every sample
-    relative to the reference time ``(H, W)`` (None without)."""
+                     device, occlusion_tol, evidence
+                     ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
+    """Dense motion ``(2, H, W)``; with ``evidence``, the brightness of every sample relative
+    to the reference time ``(H, W)`` (else None); for optical flow, the samples the flow moved
+    by at least ``threshold`` before the static suppression ``(T, h, w)`` (else None)."""
     view = _check_image(view, "view")
     order, p, ref = _resolve(scan_order, reference, view.shape)
     occ = resolved = None
@@ -120,7 +129,8 @@ def _motion_and_gain(view, scan_order, reference, method, threshold, smooth, max
         resolved = resolved_fraction(view, p)
         if not (resolved >= RESOLVED_MIN).any():
             # nothing the sub-images resolve (a star field): no flow could count
-            return np.zeros((2, *view.shape), np.float32), None
+            return np.zeros((2, *view.shape), np.float32), None, None
+    moved = None
     if method == "registration":
         m = registration_flows(view, order, ref, grid=grid, device=device)
     else:
@@ -128,6 +138,8 @@ def _motion_and_gain(view, scan_order, reference, method, threshold, smooth, max
         if occlusion_tol is not None:
             occ = occlusions(view, order, ref, m, method=method, tol=occlusion_tol)
     m = ndimage.gaussian_filter(m, (0, 0, smooth, smooth)) if smooth > 0 else m
+    if method != "registration":
+        moved = np.hypot(m[:, 0], m[:, 1]) >= max(threshold, 1e-6)
     conf = None
     if max_ratio < 1 and method == "registration":  # sub-image aliasing: test in the dense view
         conf = dense_confidence(view, order, _dense(m, order, view.shape), resolved=resolved)
@@ -139,11 +151,11 @@ def _motion_and_gain(view, scan_order, reference, method, threshold, smooth, max
         gain = np.broadcast_to(ev.gains[:, None, None, None], (len(order), 1, *m.shape[-2:]))
         gain = np.where(ev.kept[:, None], gain, 1.0)
         gain = _dense(np.repeat(gain, 2, axis=1), order, view.shape)[0]
-        return _dense(ev.motion, order, view.shape), gain
+        return _dense(ev.motion, order, view.shape), gain, moved
     if occ is not None:
         region = np.any(m != 0, axis=(0, 1))
         m[np.broadcast_to((occ & region[None])[:, None], m.shape)] = np.nan
-    return _dense(m, order, view.shape), None
+    return _dense(m, order, view.shape), None, moved
 
 
 def _dense(m: np.ndarray, order, shape) -> np.ndarray:
@@ -159,69 +171,12 @@ def _dense(m: np.ndarray, order, shape) -> np.ndarray:
     return dense
 
 
-class MotionPlan:
-    """Where every sample goes and how to interpolate: built once from a dense motion field
-    ``(2, H, W)``, applied to any number of views of that shape.
-
-    ``affected``: pixels some moved sample influences (within ``p`` pixels of a moved sample's
-    old or new position); every other pixel keeps its value. NaN motion (occluded samples) and
-    ``drop`` leave samples out of the interpolation.
-    """
-
-    def __init__(self, motion: np.ndarray, period: int, scatter: str = "linear",
-                 drop: np.ndarray | None = None):
-        motion = np.asarray(motion, np.float32)
-        _, h, w = motion.shape
-        self.shape = (h, w)
-        nan = np.isnan(motion).any(axis=0)  # occluded samples: left out
-        if nan.any():
-            drop = nan if drop is None else drop | nan
-            motion = np.where(nan[None], 0.0, motion).astype(np.float32)
-        moved = np.any(motion != 0, axis=0)
-        if drop is not None:  # samples left out (their neighbourhood is re-interpolated)
-            moved = moved | drop
-        self.empty = not moved.any()
-        if self.empty:
-            return
-        yy, xx = np.mgrid[0:h, 0:w].astype(np.float32)
-        qy, qx = yy + motion[0], xx + motion[1]
-        margin = 2 * period
-        keep = (qy > -margin) & (qy < h - 1 + margin) & (qx > -margin) & (qx < w - 1 + margin)
-        moved_in = moved & keep if drop is None else moved & keep & ~drop
-        landing = np.zeros((h, w), bool)
-        ly = np.clip(np.rint(qy[moved_in]).astype(int), 0, h - 1)
-        lx = np.clip(np.rint(qx[moved_in]).astype(int), 0, w - 1)
-        landing[ly, lx] = True
-        box = np.ones((2 * period + 1, 2 * period + 1), bool)
-        self.affected = ndimage.binary_dilation(moved | landing, box)
-        context = ndimage.binary_dilation(self.affected, box, iterations=2)
-        used = moved_in | (context & ~moved)
-        self.used = np.nonzero(used.ravel())[0]
-        points = np.column_stack([qy.ravel()[self.used], qx.ravel()[self.used]])
-        self.query = np.nonzero(self.affected.ravel())[0]
-        queries = np.column_stack([yy.ravel()[self.query], xx.ravel()[self.query]])
-        self.interp = ScatterInterpolator(points, queries, method=scatter)
-
-    def apply(self, views: np.ndarray) -> np.ndarray:
-        """Correct views ``(H, W)`` or ``(N, H, W)``; returns float32 of the same shape."""
-        views = np.asarray(views, np.float32)
-        single = views.ndim == 2
-        stack = views[None] if single else views
-        out = stack.copy()
-        if not self.empty:
-            flat = stack.reshape(len(stack), -1)
-            vals = self.interp(flat[:, self.used].T)  # (M, N)
-            res = out.reshape(len(stack), -1)
-            cur = res[:, self.query]
-            res[:, self.query] = np.where(np.isnan(vals.T), cur, vals.T)
-        return out[0] if single else out
-
-
 def correct_motion(view_image: np.ndarray, scan_order: Sequence | str | None,
                    reference: int | None = None,
                    *, method: str = "dis", scatter: str = "linear", threshold: float = 0.5,
                    smooth: float = 1.0, max_ratio: float = 0.5,
-                   motion: np.ndarray | None = None, evidence: bool = False) -> np.ndarray:
+                   motion: np.ndarray | None = None, evidence: bool = False,
+                   fallback: bool | FallbackOptions = True, return_fallback: bool = False):
     """Remove the scan artefacts of moving objects from one realigned view (docs/conventions.md).
 
     view_image: ``(H, W)``, sample (y, x) taken at frame ``scan_order.index((y % p, x % p))``;
@@ -234,25 +189,63 @@ def correct_motion(view_image: np.ndarray, scan_order: Sequence | str | None,
     (view px) are flow noise and ignored, as are motions that do not lower the warping residual
     below ``max_ratio`` times that of "no motion"; motion: a precomputed ``(2, H, W)`` field
     (skips the flow); evidence: per-sample gating and brightness matching
-    (:func:`estimate_motion`). Returns ``(H, W)`` float32; static regions are returned
-    unchanged.
+    (:func:`estimate_motion`).
+    fallback (optical flow only): where the view shows a scan artefact and the flow moved
+    samples, but the corrected image still shows the artefact, blend towards the reference
+    frame alone, band-limited (:mod:`.fallback`; True: default
+    :class:`~.fallback.FallbackOptions`, or an options object; False: off). Warns once when
+    most of the moving region fell back.
+    return_fallback: also return the :class:`~.fallback.FallbackMap` (where and how much).
+
+    Returns ``(H, W)`` float32 (with ``return_fallback``: ``(image, FallbackMap)``, whose
+    weight is all zero when no fallback ran); static regions are returned unchanged.
     """
     view = _check_image(view_image, "view_image")
     _check_options(scatter, threshold, smooth, method, max_ratio)
+    _check_fallback(fallback)
     order, p, ref = _resolve(scan_order, reference, view.shape)
-    gain = None
+    gain = moved = None
     if motion is None:
-        motion, gain = _motion_and_gain(view, order, ref, method, threshold, smooth, max_ratio,
-                                        (6, 6), None, 1.0, evidence)
+        motion, gain, moved = _motion_and_gain(view, order, ref, method, threshold, smooth,
+                                               max_ratio, (6, 6), None, 1.0, evidence)
     elif np.shape(motion) != (2, *view.shape):
         raise ValueError(f"motion must have shape (2, {view.shape[0]}, {view.shape[1]}), "
                          f"got {np.shape(motion)}")
     plan = MotionPlan(motion, p, scatter=scatter)
     if gain is not None and not plan.empty:
         out = plan.apply(view / gain)
-        return np.where(plan.affected, out, view).astype(np.float32)
-    return plan.apply(view)
+        out = np.where(plan.affected, out, view).astype(np.float32)
+    else:
+        out = plan.apply(view)
+    fmap = FallbackMap(*(np.zeros(view.shape, np.float32),) * 2, 0.0)
+    if fallback is not False and moved is not None:
+        opts = fallback if isinstance(fallback, FallbackOptions) else None
+        fmap = fallback_map(view, out, p, moved, opts)
+        out = blend(view, out, fmap, p, order[ref])
+    return (out, fmap) if return_fallback else out
 
+
+def plan_motion(view: np.ndarray, scan_order: Sequence | str | None,
+                reference: int | None = None, *, method: str = "dis",
+                scatter: str = "linear", threshold: float = 0.5, smooth: float = 1.0,
+                max_ratio: float = 0.5, fallback: bool | FallbackOptions = True) -> MotionPlan:
+    """The correction of :func:`correct_motion` as a reusable plan: the flow of ``view``
+    (optical flow, ``method`` "dis" or "farneback") and, with ``fallback``, the fallback map
+    judged on that view, for :meth:`MotionPlan.apply` to any views sampled as ``view`` (all
+    views of a stack: one flow serves them all). Options as :func:`correct_motion`."""
+    view = _check_image(view, "view")
+    _check_options(scatter, threshold, smooth, method, max_ratio)
+    _check_fallback(fallback)
+    if method == "registration":
+        raise ValueError("plan_motion needs an optical flow method ('dis' or 'farneback')")
+    order, p, ref = _resolve(scan_order, reference, view.shape)
+    motion, _, moved = _motion_and_gain(view, order, ref, method, threshold, smooth, max_ratio,
+                                        (6, 6), None, 1.0, False)
+    plan = MotionPlan(motion, p, scatter=scatter)
+    if fallback is not False:
+        opts = fallback if isinstance(fallback, FallbackOptions) else None
+        plan.with_fallback(fallback_map(view, plan.apply(view), p, moved, opts), order[ref])
+    return plan
 
 
 def sharpest_view(views: np.ndarray) -> tuple[int, int]:
@@ -267,12 +260,15 @@ def correct_motion_views(views: np.ndarray, scan_order: Sequence, reference: int
                          flow_view: tuple[int, int] | str | None = None, *,
                          mode: str = "object", method: str = "dis", scatter: str = "linear",
                          threshold: float = 0.5, smooth: float = 1.0, chunk: int = 8,
-                         workers: int = 2, progress: bool = True) -> np.ndarray:
+                         workers: int = 2, progress: bool = True,
+                         fallback: bool | FallbackOptions = True) -> np.ndarray:
     """Motion-correct a view stack ``(nnum, nnum, H, W)`` (returns a new float32 stack).
 
     mode "object": one flow, from ``flow_view`` ((u, v); None = centre view; "sharpest"),
     serves every view (the paper), one interpolation plan for all views, applied in chunks of
-    ``chunk`` views. mode "turbulence": every view gets its own smooth flow from non-rigid
+    ``chunk`` views; with ``fallback`` (:func:`correct_motion`), the fallback map of the
+    flow view serves every view too (each view blends towards its own reference frame).
+    mode "turbulence": every view gets its own smooth flow from non-rigid
     registration, ``workers`` views at a time in threads. Views that are entirely zero
     (outside the coded aperture) are left as they are.
     """
@@ -287,6 +283,7 @@ def correct_motion_views(views: np.ndarray, scan_order: Sequence, reference: int
         raise ValueError("views contain NaN or infinite values")
     n, _, h, w = views.shape
     _check_options(scatter, threshold, smooth, method)
+    _check_fallback(fallback)
     if not (isinstance(chunk, int | np.integer) and chunk >= 1):
         raise ValueError(f"chunk must be a positive integer, got {chunk!r}")
     if isinstance(flow_view, str) and flow_view != "sharpest":
@@ -304,10 +301,9 @@ def correct_motion_views(views: np.ndarray, scan_order: Sequence, reference: int
         elif flow_view == "sharpest":
             flow_view = sharpest_view(views)
         u, v = flow_view
-        motion = estimate_motion(views[u, v], order, ref, method=method, threshold=threshold,
-                                 smooth=smooth)
-        plan = MotionPlan(motion, p, scatter=scatter)
-        if plan.empty:
+        plan = plan_motion(views[u, v], order, ref, method=method, scatter=scatter,
+                           threshold=threshold, smooth=smooth, fallback=fallback)
+        if plan.identity:
             return out
         chunks = [live[i:i + chunk] for i in range(0, len(live), chunk)]
         for idx in tqdm(chunks, desc="motion: views", unit="chunk", disable=not progress):
