@@ -91,8 +91,13 @@ def test_cli_motion(tmp_path):
     assert out.shape == views.shape
     assert (tmp_path / "corrected.png").stat().st_size > 1000  # before / after / difference
     assert psnr(out[1, 1], truth[1, 1], INNER) > psnr(views[1, 1], truth[1, 1], INNER) + 6
+    res = CliRunner().invoke(app, ["motion", str(src), "--scan-order", "row-major",
+                                   "--no-fallback", "--out", str(tmp_path / "plain.tif")])
+    assert res.exit_code == 0, res.output
+    plain = correct_motion_views(views, ORDER, progress=False, fallback=False)
+    np.testing.assert_allclose(read_views(tmp_path / "plain.tif"), plain, atol=1e-6)
     res = CliRunner().invoke(app, ["motion", "--help"])
-    assert "Example" in res.output
+    assert "Example" in res.output and "--no-fallback" in res.output
     res = CliRunner().invoke(app, ["motion", str(src), "--scan-order", "[(0,0),(0,1)]",
                                    "--out", str(tmp_path / "x.tif")])
     assert res.exit_code != 0 and "scan" in str(res.exception)

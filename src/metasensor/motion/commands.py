@@ -57,6 +57,10 @@ def register(app: typer.Typer) -> None:
                                       help="centre, sharpest, or u,v (object mode)"),
         method: str = typer.Option("dis", "--method", help="dis or farneback (object mode)"),
         scatter: str = typer.Option("linear", "--scatter", help="linear or cubic"),
+        fallback: bool = typer.Option(
+            True, "--fallback/--no-fallback",
+            help="object mode: where the corrected view still shows the scan artefact, blend "
+                 "towards the reference frame alone (coarser, artefact-free)"),
     ) -> None:
         """Remove scan (grid) artefacts of moving objects or turbulence from a view stack.
 
@@ -108,7 +112,7 @@ def register(app: typer.Typer) -> None:
                              f"middle one, got {reference}")
         ref = None if reference == -1 else reference
         result = correct_motion_views(stack, order, reference=ref, flow_view=fv, mode=mode,
-                                      method=method, scatter=scatter)
+                                      method=method, scatter=scatter, fallback=fallback)
         extra = {k: v for k, v in stored.items() if k not in ("kind", "view_shape")}
         extra.update(motion_corrected=True, scan_order=[list(q) for q in order])
         write_views(out, result, cfg, extra=extra)

@@ -257,6 +257,6 @@ def blend(views: np.ndarray, corrected: np.ndarray, fmap: FallbackMap, period: i
     box = (slice(ys.min(), ys.max() + 1), slice(xs.min(), xs.max() + 1))
     ref = reference_upsample(views, period, phase, *box)
     out = corrected.copy()
-    part = corrected[..., box[0], box[1]]
-    out[..., box[0], box[1]] = part + fmap.weight[box] * (ref - part)
+    part = out[..., box[0], box[1]]
+    part += fmap.weight[box] * (ref - part)
     return out
