@@ -14,11 +14,13 @@ Evidence of the artefact, not of texture: a scan artefact is a pattern that repe
 lenslet (samples of one frame displaced together against those of the others), so the high-pass
 content of neighbouring lenslets agrees along *both* axes. :func:`lattice_coherence` is that
 agreement, the local correlation of each lenslet's ``p × p`` pattern with its neighbours' along
-rows and along columns (the smaller of the two), about 0 or below for a static scene's texture
-(a straight static edge repeats along one axis only) and 0.3 to 0.7 where a mover's samples are
-misplaced. The moving region is where the realigned view shows such coherence *and* the flow
-moved samples (motion evidence from two sides); inside it the fallback weight rises with the
-coherence left in the corrected image.
+rows and along columns (the smaller of the two): near 0 or below for a static scene's texture
+(whose high-pass content has no reason to repeat from lenslet to lenslet; a straight static edge
+repeats along one axis only), positive where a mover's samples are misplaced. The moving
+region is the coherent lenslets connected to lenslets where the flow moved samples (motion
+evidence from two sides); inside it the fallback weight rises with the coherence left in the
+corrected image. The correction itself is the paper's optical-flow motion correction (Wu et al.,
+Nature 612, 62-71, 2022, Methods), :mod:`.correct`.
 
 Hand-written: the test is specific to the scan's sample lattice. The B-spline prefilter is
 scipy's (:func:`scipy.ndimage.spline_filter`); its separable evaluation at the ``p`` fixed
@@ -43,7 +45,7 @@ class FallbackOptions:
     """Settings of the fallback (coherence values are correlations, lengths in lenslets).
 
     region : lattice coherence of the realigned view above which a lenslet shows a scan
-        artefact (static natural scenes stay below about 0.3 at their 99.9th percentile).
+        artefact (the measurements behind the defaults: ``docs/decisions.md``, 2026-11-26).
     low, high : coherence left in the corrected image at which the fallback weight starts to
         rise (0) and is full (1); linear in between.
     window : Gaussian window (lenslets) over which neighbouring lenslets' patterns are compared.
@@ -117,11 +119,22 @@ def _lenslet_patterns(img: np.ndarray, p: int, highpass: float) -> np.ndarray:
 
 def lattice_coherence(img: np.ndarray, period: int, window: float = 1.5,
                       highpass: float = 0.6) -> np.ndarray:
-    """Scan-artefact evidence per lenslet ``(H // p, W // p)``: the correlation of each
-    lenslet's high-pass ``p × p`` pattern with its neighbours', averaged over a Gaussian
-    ``window`` (lenslets), along rows and along columns, the smaller of the two (see the module
-    docstring). In [-1, 1]; about 0 or below without an artefact. Lenslets whose pattern
-    energy is below 5 % of the image's median give little weight (energy floor)."""
+    """Scan-artefact evidence per lenslet (see the module docstring).
+
+    Parameters
+    ----------
+    img : (H, W) realigned view [any intensity unit].
+    period : scan period p (a lenslet is p × p view px).
+    window : Gaussian window [lenslets] over which neighbouring patterns are compared.
+    highpass : a lenslet's pattern is ``img`` minus its Gaussian blur of ``highpass · p`` px.
+
+    Returns
+    -------
+    (H // p, W // p) float32 in [-1, 1]: the correlation of each lenslet's high-pass
+    ``p × p`` pattern with its neighbours' along rows and along columns, the smaller of the
+    two; near 0 or below without an artefact. The energy is floored at 5 % of the image's
+    median, so flat lenslets give little evidence.
+    """
     b = _lenslet_patterns(img, period, highpass)
     h, w = b.shape[2:]
     if h < 2 or w < 2:
@@ -165,10 +178,22 @@ def _bspline_matrix(n_out: int, n_in: int, phase: int, p: int) -> sparse.csr_mat
 
 def reference_upsample(views: np.ndarray, period: int, phase: tuple[int, int],
                        rows: slice = slice(None), cols: slice = slice(None)) -> np.ndarray:
-    """The samples of one scan phase ``(r, c)`` (``view[r::p, c::p]``) interpolated onto the
-    full view grid by cubic B-spline interpolation (exact at those samples, band-limited
-    between them): ``views`` ``(H, W)`` or ``(N, H, W)`` → float32 of the same shape, or of the
-    window ``[rows, cols]`` of it."""
+    """The samples of one scan phase interpolated onto the full view grid.
+
+    Cubic B-spline interpolation (exact at the samples, band-limited between them; scipy's
+    ``mode="mirror"`` at the borders) of ``view[r::p, c::p]``, whose sample (i, j) sits at view
+    pixel ``(p·i + r, p·j + c)``.
+
+    Parameters
+    ----------
+    views : (H, W) or (N, H, W) realigned views.
+    period : scan period p. phase : (r, c), the scan phase whose samples are kept.
+    rows, cols : the window of the output to compute (default: all of it).
+
+    Returns
+    -------
+    float32 array, ``views``' shape (or that of the window).
+    """
     views = np.asarray(views, np.float32)
     single = views.ndim == 2
     stack = views[None] if single else views
@@ -206,13 +231,18 @@ def fallback_map(view: np.ndarray, corrected: np.ndarray, period: int, flow_move
                  options: FallbackOptions | None = None) -> FallbackMap:
     """Decide where the corrected view falls back to the reference frame alone.
 
+    Parameters
+    ----------
     view, corrected : (H, W) realigned view and its flow-corrected version.
-    period : scan period p. flow_moved : (T, h, w) bool, samples that the flow moved by at
-        least the motion threshold (each frame on its sub-image grid; :func:`.flow.sub_images`).
-    options : :class:`FallbackOptions`.
+    period : scan period p.
+    flow_moved : (T, h, w) bool, samples that the flow moved by at least the motion threshold
+        [view px] (each frame on its sub-image grid; :func:`.flow.sub_images`).
+    options : :class:`FallbackOptions` (None: defaults).
 
-    Returns a :class:`FallbackMap`; warns once when more than ``options.warn_share`` of the
-    moving region fell back.
+    Returns
+    -------
+    :class:`FallbackMap`. Warns once when more than ``options.warn_share`` of the moving
+    region fell back.
     """
     opt = FallbackOptions() if options is None else options
     shape = np.shape(view)
