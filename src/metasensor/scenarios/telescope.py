@@ -36,13 +36,17 @@ __all__ = ["TelescopeSettings", "run_telescope"]
 class TelescopeSettings(ScenarioSettings):
     """:class:`~metasensor.scenarios.report.ScenarioSettings` (``seed``: turbulence and noise)
     and size : scene side (pixels); obstruction : central obstruction ratio; d_over_r0 : total
-    D / r0; periods : scan periods simulated; stride : frames between kymograph windows."""
+    D / r0; periods : scan periods simulated; stride : frames between kymograph windows;
+    key_every, sim_subsample : the simulator's sampling of the evolving turbulence
+    (:class:`~metasensor.simulation.turbulence.Turbulence` ``key_every`` and ``subsample``)."""
 
     size: int = 180
     obstruction: float = 0.35
     d_over_r0: float = 5.0
     periods: int = 2
     stride: int = 5
+    key_every: int = 6
+    sim_subsample: int = 1
 
     def __post_init__(self) -> None:
         if not (isinstance(self.size, int) and self.size >= 96):
@@ -111,7 +115,9 @@ def run_telescope(out: str | Path, settings: TelescopeSettings | None = None,
         cfg = ms.SystemConfig(obstruction=s.obstruction)
         n = cfg.scan**2
         scene = natural_image("moon", s.size).astype(np.float32)
-        turb = LayeredTurbulence(d_over_r0=s.d_over_r0, samples=64, seed=s.seed, span=n * s.periods)
+        turb = LayeredTurbulence(d_over_r0=s.d_over_r0, samples=64, seed=s.seed,
+                                 span=n * s.periods, key_every=s.key_every,
+                                 subsample=s.sim_subsample)
         caps = []
         for k in range(s.periods):
             tk = turb.at(k * n)

@@ -10,7 +10,9 @@ is the lenslet centre at sensor pixel ``(Y·d + nnum//2, X·d + nnum//2)``. ``tr
 
 Forward model (inverse-crime free, :mod:`metasensor.simulation.kernels`): the scene is up-sampled
 3× (cubic spline, flux preserving), blurred by ``view_psfs(subsample=3)`` (per field block and
-depth layer, :mod:`~metasensor.simulation.layers`; per frame under turbulence), sampled at the
+depth layer, :mod:`~metasensor.simulation.layers`; per frame under turbulence, or per key
+frame interpolated in time and at the turbulence's own ``subsample``: ``Turbulence.key_every``,
+``Turbulence.subsample``), sampled at the
 lenslet centres of each scan phase (each frame sees the scene at its own time under ``motion``),
 then photon + read noise and quantisation (:mod:`~metasensor.simulation.noise`), then
 ``unrealign`` to raw frames. ``views = realign(frames)`` exactly.
@@ -136,7 +138,9 @@ def _plan(inp: SimInputs, field_zernike, depth, settings: dict, dev, seeds) -> R
     screens = None if turbulence is None else turbulence.screens(t_count, seeds[3])
     tref = motion.reference_time(t_count) if motion is not None else (t_count - 1) / 2
     banks = KernelBanks(inp.cfg, dev, settings["upsample"], settings["psf"])
-    return RenderPlan(comps, grid, planes, banks, motion, screens, tref)
+    sampling = ({} if turbulence is None else
+                {"key_every": turbulence.key_every, "subsample": turbulence.subsample})
+    return RenderPlan(comps, grid, planes, banks, motion, screens, tref, **sampling)
 
 
 def _raw(inp: SimInputs, clean: np.ndarray, noise: dict, seed) -> tuple:

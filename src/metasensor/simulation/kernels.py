@@ -109,20 +109,22 @@ def _psf_module():
 
 
 def fine_view_bank(cfg, zernike=None, depth: float = 0.0, phase=None, amplitude=None,
-                   device=None) -> np.ndarray:
+                   device=None, subsample: int = SUBSAMPLE) -> np.ndarray:
     """``view_psfs(..., subsample=3)`` rescaled to photons per unit point flux:
     (nnum, nnum, Kf, Kf) float32. (``view_psfs`` returns ``H_sub = per-point / subsample²``,
     each fine point carrying 1/subsample² of a pixel's flux; :func:`collapse` distributes the
-    pixel's flux itself through the up-sampler ``u``, so the factor is put back here.)"""
+    pixel's flux itself through the up-sampler ``u``, so the factor is put back here.)
+    ``subsample``: another odd sub-pixel factor (1: the pixel-grid bank, for which
+    :func:`collapse` with ``factor=1`` is the identity)."""
     psf = _psf_module()
-    kwargs = {"subsample": SUBSAMPLE, "device": device}
+    kwargs = {"subsample": int(subsample), "device": device}
     if phase is not None:
         kwargs["phase"] = phase
         kwargs["cache"] = False
     if amplitude is not None:
         kwargs["amplitude"] = amplitude
     bank = psf.view_psfs(cfg, zernike, float(depth), **kwargs)
-    return np.asarray(bank, dtype=np.float32) * np.float32(SUBSAMPLE**2)
+    return np.asarray(bank, dtype=np.float32) * np.float32(int(subsample) ** 2)
 
 
 def _widefield_size(cfg, zernike, depth: float, phase, sampling: float,

@@ -16,7 +16,7 @@ from metasensor.simulation.layers import add_zernike
 from metasensor.simulation.render import Lattice, sampled_conv
 from metasensor.simulation.turbulence import screen_phase
 
-__all__ = ["KernelBanks", "RenderPlan", "accumulate", "clean_views"]
+__all__ = ["KernelBanks", "RenderPlan", "accumulate", "clean_views", "time_weights"]
 
 
 class KernelBanks:
@@ -29,12 +29,21 @@ class KernelBanks:
         self.cfg, self.device, self.upsample, self._cache = cfg, device, upsample, {}
         self.psf = kern.fine_view_bank if psf is None else psf
 
-    def views(self, z, depth, phase=None, key=None):
-        """The views' kernels ``(nnum², k, k)`` of Noll vector ``z`` at ``depth`` (m)."""
-        k = ("v", None if z is None else tuple(np.round(z, 12)), depth, key)
+    def views(self, z, depth, phase=None, key=None, subsample: int = kern.SUBSAMPLE):
+        """The views' kernels ``(nnum², k, k)`` of Noll vector ``z`` at ``depth`` (m), from
+        fine banks at ``subsample`` (another value than the default needs the built-in
+        provider)."""
+        k = ("v", None if z is None else tuple(np.round(z, 12)), depth, key, subsample)
         if k not in self._cache:
-            fine = self.psf(self.cfg, z, depth, phase=phase, device=self.device)
-            coll = kern.collapse(fine, upsample=self.upsample)
+            if subsample == kern.SUBSAMPLE:
+                fine = self.psf(self.cfg, z, depth, phase=phase, device=self.device)
+            elif self.psf is kern.fine_view_bank:
+                fine = self.psf(self.cfg, z, depth, phase=phase, device=self.device,
+                                subsample=subsample)
+            else:
+                raise ValueError(f"a PSF provider gives subsample-{kern.SUBSAMPLE} banks only; "
+                                 f"turbulence.subsample={subsample} needs the built-in PSFs")
+            coll = kern.collapse(fine, factor=subsample, upsample=self.upsample)
             self._cache[k] = kern.as_kernels(kern.crop_energy(coll), self.device)
         return self._cache[k]
 
@@ -66,6 +75,9 @@ class RenderPlan:
         Turbulence phase screens per frame (waves), None without turbulence.
     tref : float
         The reference time (frame index) the truth shows.
+    key_every, subsample : int
+        The turbulence's key-frame spacing and bank sub-sampling
+        (:class:`~metasensor.simulation.turbulence.Turbulence`).
     """
 
     comps: list
@@ -75,6 +87,19 @@ class RenderPlan:
     motion: Any
     screens: np.ndarray | None
     tref: float
+    key_every: int = 1
+    subsample: int = kern.SUBSAMPLE
+
+
+def time_weights(t: int, n_frames: int, every: int) -> list[tuple[int, float]]:
+    """``[(key frame, weight), ...]`` of frame ``t`` of ``n_frames``: key frames are every
+    ``every``-th frame and the last; between two of them the weights fall linearly (sum 1)."""
+    if every <= 1 or t % every == 0 or t == n_frames - 1:
+        return [(t, 1.0)]
+    k0 = t - t % every
+    k1 = min(k0 + every, n_frames - 1)
+    a = (t - k0) / (k1 - k0)
+    return [(k0, 1.0 - a), (k1, a)]
 
 
 def accumulate(image: np.ndarray, comps, kernel_of, rows: Lattice, cols: Lattice,
@@ -109,13 +134,17 @@ def clean_views(scene: np.ndarray, inp, plan: RenderPlan, progress: bool) -> np.
             accumulate(scene, shown, lambda cp: banks.views(add_zernike(cp.zernike, focus),
                                                             cp.depth), rows, cols, views, dev)
     else:
+        count = len(inp.order)
         for t, (r, c) in enumerate(tqdm(inp.order, desc="frames", disable=not progress)):
             img = scene if motion is None else motion.scene_at(scene, t - plan.tref)
-            phase = None if screens is None else screen_phase(screens[t])
-            key = None if screens is None else t
             sub = torch.zeros((n * n, ly, lx), dtype=torch.float32, device=dev)
-            accumulate(img, comps, lambda cp, ph=phase, k=key: banks.views(
-                add_zernike(cp.zernike, focus), cp.depth, ph, k), Lattice(r * d + n // 2, n, ly),
-                Lattice(c * d + n // 2, n, lx), sub, dev)
+            keys = [(None, 1.0)] if screens is None else time_weights(t, count, plan.key_every)
+            for key, wt in keys:
+                phase = None if key is None else screen_phase(screens[key])
+                accumulate(img if wt == 1.0 else img * np.float32(wt), comps,
+                           lambda cp, ph=phase, k=key: banks.views(
+                               add_zernike(cp.zernike, focus), cp.depth, ph, k,
+                               plan.subsample if k is not None else kern.SUBSAMPLE),
+                           Lattice(r * d + n // 2, n, ly), Lattice(c * d + n // 2, n, lx), sub, dev)
             views[:, r::p, c::p] = sub
     return views.reshape(n, n, ly * p, lx * p).cpu().numpy()

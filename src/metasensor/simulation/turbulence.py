@@ -7,6 +7,15 @@ configuration's wavelength, ``outer_scale`` is L0 / D (``None``: Kolmogorov, L0 
 Screens are returned in **waves**, sampled on ``samples × samples`` points covering the square
 ``rho ∈ [−1, 1]²`` (sample k at ``rho = −1 + (k + 0.5) · 2 / samples``). Isoplanatic: one screen
 per frame for the whole field; per-view aberrations arise through the views' sub-apertures.
+
+How finely the simulator follows the screens (:func:`metasensor.simulation.capture.simulate`):
+``key_every`` = k computes the PSF banks of key frames only (every k-th frame of the period and
+its last) and renders a frame between two key frames with the PSFs interpolated linearly in
+time (the partition of unity the simulator also uses across the field); 1 = a bank per frame.
+``subsample``: sub-pixel sampling of those per-frame banks (3: the simulator's continuous scene
+model, :mod:`metasensor.simulation.kernels`; 1: the pixel grid, nine times fewer point
+positions; the data still differ from any reconstruction's model, which has one wavefront per
+block and window, while every frame here has its own).
 """
 
 from __future__ import annotations
@@ -22,15 +31,24 @@ __all__ = ["Turbulence", "screen_phase"]
 
 @dataclass(frozen=True)
 class Turbulence:
-    """Frozen-flow turbulence (units in the module docstring)."""
+    """Frozen-flow turbulence (units and the simulator's sampling ``key_every``, ``subsample``
+    in the module docstring)."""
 
     d_over_r0: float = 2.0
     outer_scale: float | None = None
     wind: tuple[float, float] = (0.0, 0.05)
     samples: int = 64
     inner_scale: float = 0.01
+    key_every: int = 1
+    subsample: int = 3
 
     def __post_init__(self) -> None:
+        for name in ("key_every", "subsample"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int | np.integer) or v < 1:
+                raise ValueError(f"{name} must be a positive integer, got {v!r}")
+        if self.subsample % 2 == 0:
+            raise ValueError(f"subsample must be odd, got {self.subsample!r}")
         if not (self.d_over_r0 > 0 and math.isfinite(self.d_over_r0)):
             raise ValueError(f"d_over_r0 must be positive, got {self.d_over_r0!r}")
         if self.outer_scale is not None and not self.outer_scale > 0:
