@@ -13,6 +13,16 @@ Rows:
   the cores used, per megapixel.
 - ``stitch-cluster``: the same small mosaic through a ``dask.distributed`` LocalCluster (2
   processes x 1 thread) against local threads: max |difference|.
+- ``telescope-simulation``: what the telescope's evolving turbulence costs the simulator (CPU
+  seconds, this process, torch on one thread): one fine view bank (``subsample=3``) and one on
+  the pixel grid (``subsample=1``) of a frame's wavefront, the per-frame fine-bank simulation
+  extrapolated from the first (frames x field blocks x periods banks), and one scan period
+  simulated with key frames every 1 (a bank per frame), 6 and 12 frames on the pixel grid, and
+  with the screen held at the period's first frame; each one's relative r.m.s. difference of
+  the clean views from the bank-per-frame simulation (the scene: the Moon, ``size`` px).
+
+``python benchmarks/bench_scenarios.py --telescope [--quick]`` runs the two telescope rows alone
+and puts them into the results JSON in place of the old ones (the other rows kept).
 """
 
 from __future__ import annotations
@@ -151,13 +161,13 @@ def _cluster_row() -> dict:
     return {"case": "stitch-cluster", "max_abs_diff": diff, "ok": diff <= 1e-5}
 
 
-def _scenario_rows(quick: bool) -> list[dict]:
+def _scenario_rows(quick: bool, names=("plastic-wrap", "telescope", "gigapixel")) -> list[dict]:
     from metasensor.scenarios import run_scenario
 
     small = {"plastic-wrap": {"size": 144, "blocks": (3, 3), "grid": (3, 3)},
-             "telescope": {"size": 120}, "gigapixel": {"tile": 120}} if quick else {}
+             "telescope": {"size": 192}, "gigapixel": {"tile": 120}} if quick else {}
     rows = []
-    for name in ("plastic-wrap", "telescope", "gigapixel"):
+    for name in names:
         with tempfile.TemporaryDirectory() as tmp:
             s = run_scenario(name, tmp, progress=False, **small.get(name, {}))
         row = {"case": name, "seconds": s["seconds"], "cpu_seconds": s["cpu_seconds"]}
@@ -168,13 +178,108 @@ def _scenario_rows(quick: bool) -> list[dict]:
             row.update({"pupil_error": s["pupil"]["error"],
                         "residual_max_waves": s["residual_max_waves"],
                         "dao_gain_db": s["dao_gain_db"], "dao_over_2d_db": s["dao_over_2d_db"],
-                        "kymo_lattice_ratio": s["kymograph"]["lattice_corrected_over_static"]})
+                        "kymo_lattice_ratio": s["kymograph"]["lattice_corrected_over_static"],
+                        "psnr_db": {r["sensor"]: r["psnr_db"] for r in s["table"]},
+                        "stage_seconds": s["stage_seconds"]})
         else:
             row.update({"registration_error_px": s["registration_error_px"],
                         "seam_ratio": s["table"][1]["seam_ratio"],
                         "truth_seam_ratio": s["table"][1]["truth_seam_ratio"]})
         rows.append(row)
     return rows
+
+
+def _sim_views(scene, cfg, turb, fz, blocks) -> tuple[np.ndarray, float]:
+    """Clean views of one scan period (scale 1) and the CPU seconds they took."""
+    import metasensor as ms
+
+    c0 = time.process_time()
+    cap = ms.simulate(scene, cfg, turbulence=turb, field_zernike=fz, field_blocks=blocks,
+                      comparison=False, seed=0, scale=1.0)
+    return cap.views_clean, time.process_time() - c0
+
+
+def telescope_simulation(quick: bool = False) -> dict:
+    """The ``telescope-simulation`` row (module docstring)."""
+    import dataclasses
+
+    import torch
+
+    import metasensor as ms
+    from metasensor.optics.psf import view_psfs
+    from metasensor.scenarios.screens import LayeredTurbulence
+    from metasensor.scenarios.telescope import TelescopeSettings
+    from metasensor.simulation.scenes import natural_image
+    from metasensor.simulation.turbulence import screen_phase
+
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        st = TelescopeSettings()
+        cfg = ms.SystemConfig(obstruction=st.obstruction)
+        n = cfg.scan**2
+        turb = LayeredTurbulence(d_over_r0=st.d_over_r0, samples=64, seed=st.seed,
+                                 span=n * st.periods)
+        fz = turb.field_zernike(n)
+        screens = turb.screens(n)
+        bank_s = {}
+        for sub in (3, 1):
+            c0 = time.process_time()
+            view_psfs(cfg, fz(0.5, 0.5)[0], 0.0, phase=screen_phase(screens[0]), subsample=sub,
+                      cache=False)
+            bank_s[sub] = time.process_time() - c0
+        blocks = st.blocks[0] * st.blocks[1]
+        scene = natural_image("moon", st.size).astype(np.float32)
+        ref, cpu = _sim_views(scene, cfg, dataclasses.replace(turb, subsample=1), fz, st.blocks)
+        periods = {"1": cpu}
+        err = {}
+
+        def rel(v):
+            return float(np.sqrt(((v - ref) ** 2).mean() / (ref**2).mean()))
+
+        for every in (6, 12):
+            v, periods[str(every)] = _sim_views(
+                scene, cfg, dataclasses.replace(turb, subsample=1, key_every=every), fz,
+                st.blocks)
+            err[str(every)] = rel(v)
+        class Held(LayeredTurbulence):
+            """The screen of the period's first frame, held for the whole period."""
+
+            def screens(self, n_frames, seed=None):
+                return np.repeat(super().screens(1), n_frames, axis=0)
+
+        held = Held(**{f.name: getattr(turb, f.name) for f in dataclasses.fields(turb)})
+        v, periods["held"] = _sim_views(scene, cfg, dataclasses.replace(
+            held, subsample=1, key_every=10 * n), fz, st.blocks)
+        err["held"] = rel(v)
+    finally:
+        torch.set_num_threads(threads)
+    return {"case": "telescope-simulation", "size": st.size, "d_over_r0": st.d_over_r0,
+            "bank_cpu_s_subsample3": bank_s[3], "bank_cpu_s_subsample1": bank_s[1],
+            "per_frame_fine_banks": n * blocks * st.periods,
+            "per_frame_fine_cpu_s_estimate": bank_s[3] * n * blocks * st.periods,
+            "period_cpu_s_by_key_every": periods,
+            "views_rel_rms_vs_per_frame": err,
+            "demo_key_every": st.key_every, "demo_subsample": st.sim_subsample}
+
+
+def telescope_rows(quick: bool = False) -> list[dict]:
+    """The telescope demo's row (:func:`_scenario_rows` for it alone) and the simulation's."""
+    return _scenario_rows(quick, names=("telescope",)) + [telescope_simulation(quick)]
+
+
+def merge_rows(rows: list[dict], quick: bool = False) -> Path:
+    """Put ``rows`` into the results JSON in place of the rows of the same ``case``."""
+    from metasensor.io.atomic import atomic_write_text
+    from run_all import machine, result_name
+
+    path = HERE / "results" / result_name("scenarios", quick)
+    doc = json.loads(path.read_text()) if path.exists() else {
+        "benchmark": "scenarios", "quick": quick, "machine": machine(), "rows": []}
+    cases = {r["case"] for r in rows}
+    doc["rows"] = [r for r in doc["rows"] if r.get("case") not in cases] + rows
+    atomic_write_text(path, json.dumps(doc, indent=2) + "\n")
+    return path
 
 
 def run(quick: bool = False) -> list[dict]:
@@ -194,4 +299,11 @@ def run(quick: bool = False) -> list[dict]:
 
 
 if __name__ == "__main__":
-    print(json.dumps(run(quick="--quick" in sys.argv), indent=1))
+    if "--telescope" in sys.argv:
+        sys.path.insert(0, str(HERE))
+        quick = "--quick" in sys.argv
+        rows = telescope_rows(quick)
+        print(json.dumps(rows, indent=1))
+        print(merge_rows(rows, quick))
+    else:
+        print(json.dumps(run(quick="--quick" in sys.argv), indent=1))

@@ -46,7 +46,7 @@ def test_unknown_scenario_and_misplaced_scheduler_are_refused(tmp_path):
 @pytest.mark.slow
 @pytest.mark.parametrize("name, settings", [
     ("plastic-wrap", {"size": 144, "blocks": (3, 3), "grid": (3, 3)}),
-    ("telescope", {"size": 120}),
+    ("telescope", {"size": 192}),
     ("gigapixel", {"tile": 120}),
 ])
 def test_scenario_end_to_end_small(tmp_path, name, settings):

@@ -12,16 +12,19 @@ sequence. Processing uses the public API only: the first scan window is realigne
 obstruction is estimated from those views
 (:func:`~metasensor.scenarios.pupil.estimate_annulus`) and used for the PSFs; the image is
 reconstructed without DAO (ISA with the ideal annular PSFs) and with multisite wave DAO
-(``ms.reconstruct(method="wave")``); the 2D sensor shares the photon budget. A kymograph (a
-line through the motion-corrected centre view, one row per sliding window of ``stride``
-frames) shows whether scan artefacts remain: its power at the scan lattice's spatial
-frequencies, relative to the same line of a turbulence-free capture (the static reference).
-The per-block wavefront residual compares the DAO estimate with the true wavefront averaged
-over the window's frames (Noll 4-45; piston, tip and tilt are image motion).
+(``ms.reconstruct(method="wave")``); the 2D sensor
+shares the photon budget. A kymograph (a line through the full-aperture image on the views' grid,
+the sum of the views inside the estimated pupil, one row per sliding window of one scan period
+every ``stride`` frames, motion-corrected by non-rigid registration) shows whether scan
+artefacts remain: its power at the scan lattice's spatial frequencies relative to the same
+line of a turbulence-free capture (the static reference). The per-block wavefront residual
+compares the DAO estimate with the true wavefront averaged over the window's frames (and, as a
+second figure, at its reference frame; Noll 4-45: piston, tip and tilt are image motion).
 """
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -35,22 +38,24 @@ __all__ = ["TelescopeSettings", "run_telescope"]
 @dataclass(frozen=True)
 class TelescopeSettings(ScenarioSettings):
     """:class:`~metasensor.scenarios.report.ScenarioSettings` (``seed``: turbulence and noise)
-    and size : scene side (pixels); obstruction : central obstruction ratio; d_over_r0 : total
-    D / r0; periods : scan periods simulated; stride : frames between kymograph windows;
+    and size : scene side (pixels, >= 192: 12 lenslets); obstruction : central obstruction
+    ratio; d_over_r0 : total D / r0; periods : scan periods simulated; stride : frames
+    between kymograph windows;
     key_every, sim_subsample : the simulator's sampling of the evolving turbulence
     (:class:`~metasensor.simulation.turbulence.Turbulence` ``key_every`` and ``subsample``)."""
 
-    size: int = 180
+    size: int = 192
     obstruction: float = 0.35
     d_over_r0: float = 5.0
     periods: int = 2
-    stride: int = 5
+    stride: int = 2
     key_every: int = 6
     sim_subsample: int = 1
 
     def __post_init__(self) -> None:
-        if not (isinstance(self.size, int) and self.size >= 96):
-            raise ValueError(f"size must be an integer >= 96, got {self.size!r}")
+        if not (isinstance(self.size, int) and self.size >= 192):  # 12 lenslets: the views'
+            # motion correction needs 12 samples per scan period and axis
+            raise ValueError(f"size must be an integer >= 192, got {self.size!r}")
         if not 0.0 <= self.obstruction < 0.9:
             raise ValueError(f"obstruction must lie in [0, 0.9), got {self.obstruction!r}")
         if not self.d_over_r0 > 0:
@@ -59,49 +64,105 @@ class TelescopeSettings(ScenarioSettings):
             raise ValueError("periods must be >= 2, stride and blocks >= 1")
 
 
-def _kymograph(frames, cfg, order, stride: int, correct: bool) -> np.ndarray:
-    """(windows, W) middle row of the (motion-corrected) centre view of sliding windows."""
+class _Clock:
+    """Wall and CPU seconds (``time.perf_counter``, ``time.process_time``) of named stages."""
+
+    def __init__(self) -> None:
+        self.laps: dict[str, dict[str, float]] = {}
+        self._t, self._c = time.perf_counter(), time.process_time()
+
+    def lap(self, name: str) -> None:
+        t, c = time.perf_counter(), time.process_time()
+        self.laps[name] = {"wall": t - self._t, "cpu": c - self._c}
+        self._t, self._c = t, c
+
+
+def _kymograph(frames, cfg, order, stride: int, correct: bool, pupil) -> np.ndarray:
+    """(windows, W) middle row of the sum of the views inside ``pupil`` ((nnum, nnum) bool:
+    the full-aperture image on the views' grid) of sliding windows of one scan period every
+    ``stride`` frames, motion-corrected by non-rigid registration when ``correct``."""
     import metasensor as ms
 
     n = len(order)
     half = n // 2
     rows = []
-    c = cfg.center
     for t in range(half, frames.shape[0] - (n - 1 - half), stride):
         idx = list(range(t - half, t - half + n))
         worder = [order[i % n] for i in idx]
-        view = ms.realign(frames[idx], cfg, scan_order=worder)[c, c]
+        image = ms.realign(frames[idx], cfg, scan_order=worder)[pupil].sum(axis=0)
         if correct:
-            view = ms.correct_motion(view, worder, reference=half, method="registration")
-        rows.append(np.asarray(view)[view.shape[0] // 2])
+            image = ms.correct_motion(image, worder, reference=half, method="registration")
+        rows.append(np.asarray(image)[image.shape[0] // 2])
     return np.stack(rows)
 
 
 def _lattice(kymo: np.ndarray, period: int) -> float:
+    """Power at the scan lattice's spatial frequencies along each window's line, relative to
+    the line's mean power (:func:`~metasensor.scenarios.measure.lattice_energy` along x)."""
     from metasensor.scenarios.measure import lattice_energy
 
     return lattice_energy(kymo.T, period)
 
 
-def _residuals(rec, turb, n: int, blocks) -> np.ndarray:
+def _residuals(rec, turb, n: int, blocks) -> dict[str, np.ndarray]:
+    """Per block, r.m.s. (waves, Noll 4-45) of the DAO estimate minus the true wavefront at
+    the block's centre, averaged over the window's frames (``mean``) and at its reference
+    frame (``reference``), and of the true wavefronts themselves (``true_mean``)."""
     from metasensor.recon.blocks import block_centre_normalised
+    from metasensor.scenarios.screens import fit_screen
 
-    out = np.zeros(tuple(blocks))
+    out = {k: np.zeros(tuple(blocks)) for k in ("mean", "reference", "true_mean")}
     for b in rec.blocks:
-        yn, xn = block_centre_normalised(b, rec.image.shape)
-        truth = turb.mean_zernike(n, float(yn), float(xn))
+        yn, xn = (float(a) for a in block_centre_normalised(b, rec.image.shape))
+        mean = turb.mean_zernike(n, yn, xn)
+        ref = fit_screen(turb.screen(turb.t0 + n // 2, yn, xn))
         est = np.zeros(45)
         z = np.asarray(rec.zernike[b.index], float).ravel()[:45]
         est[:z.size] = z
-        out[b.index] = np.sqrt(((est[3:45] - truth[3:45]) ** 2).sum())
+        out["mean"][b.index] = np.sqrt(((est[3:45] - mean[3:45]) ** 2).sum())
+        out["reference"][b.index] = np.sqrt(((est[3:45] - ref[3:45]) ** 2).sum())
+        out["true_mean"][b.index] = np.sqrt((mean[3:45] ** 2).sum())
     return out
+
+
+def _simulate(s: TelescopeSettings, cfg, turb, scene) -> tuple[list, object]:
+    """The captures of ``s.periods`` consecutive scan periods (the first with the 2D sensor)
+    and a turbulence-free one (the kymograph's static reference), one intensity scale."""
+    import metasensor as ms
+
+    n = cfg.scan**2
+    caps = []
+    for k in range(s.periods):
+        tk = turb.at(k * n)
+        caps.append(ms.simulate(scene, cfg, turbulence=tk, field_zernike=tk.field_zernike(n),
+                                field_blocks=s.blocks, snr_db=s.snr_db, seed=s.seed + k,
+                                comparison=k == 0, scale=caps[0].scale if caps else None))
+    static = ms.simulate(scene, cfg, snr_db=s.snr_db, seed=s.seed + 99, comparison=False,
+                         scale=caps[0].scale)
+    return caps, static
+
+
+def _figures(out: Path, s: TelescopeSettings, truth, images: dict, kymos: dict, est) -> dict:
+    from metasensor.io.figures import save_panel
+
+    lo, hi = float(truth.min()), float(truth.max())
+    panel = [("ground truth", truth)] + [(k, np.clip(v, lo, hi)) for k, v in images.items()]
+    return {
+        "full field": save_panel(out / "full_field.png", panel, ncols=4,
+                                 suptitle=f"Moon through turbulence, D/r0 = {s.d_over_r0}"),
+        "kymographs": save_panel(out / "kymographs.png", list(kymos.items()), ncols=3,
+                                 suptitle="kymographs of the full-aperture image (time down, "
+                                          "position across)"),
+        "pupil": save_panel(out / "pupil.png", [("angular intensity", est.intensity),
+                                                ("binary pupil", est.amplitude)], ncols=2,
+                            suptitle=f"estimated obstruction {est.obstruction:.3f} "
+                                     f"(true {s.obstruction})")}
 
 
 def run_telescope(out: str | Path, settings: TelescopeSettings | None = None,
                   progress: bool = True) -> dict:
     """Run the scenario and write its report into ``out``; returns the summary."""
     import metasensor as ms
-    from metasensor.io.figures import save_panel
     from metasensor.metrics import psnr
     from metasensor.motion.correct import correct_motion_views
     from metasensor.scenarios.pupil import estimate_annulus
@@ -111,75 +172,68 @@ def run_telescope(out: str | Path, settings: TelescopeSettings | None = None,
 
     s = settings or TelescopeSettings()
     with scenario_run(out, "telescope", 5, progress) as run:
-        out, steps = run.out, run.steps
+        out, steps, clock = run.out, run.steps, _Clock()
         cfg = ms.SystemConfig(obstruction=s.obstruction)
         n = cfg.scan**2
-        scene = natural_image("moon", s.size).astype(np.float32)
         turb = LayeredTurbulence(d_over_r0=s.d_over_r0, samples=64, seed=s.seed,
                                  span=n * s.periods, key_every=s.key_every,
                                  subsample=s.sim_subsample)
-        caps = []
-        for k in range(s.periods):
-            tk = turb.at(k * n)
-            caps.append(ms.simulate(scene, cfg, turbulence=tk, field_zernike=tk.field_zernike(n),
-                                    field_blocks=s.blocks, snr_db=s.snr_db, seed=s.seed + k,
-                                    comparison=k == 0, scale=caps[0].scale if caps else None))
-        static = ms.simulate(scene, cfg, snr_db=s.snr_db, seed=s.seed + 99, comparison=False,
-                             scale=caps[0].scale)
-        steps.update()
+        caps, static = _simulate(s, cfg, turb, natural_image("moon", s.size).astype(np.float32))
         cap = caps[0]
+        clock.lap("simulate")
+        steps.update()
         views = ms.realign(cap.frames, cfg, cap.scan_order)
         corrected = correct_motion_views(views, cap.scan_order, reference=n // 2, mode="turbulence",
                                          progress=False)
         est = estimate_annulus(corrected, cfg)
         cfg_est = cfg.replace(obstruction=round(est.obstruction, 3))
+        clock.lap("motion_and_pupil")
         steps.update()
         no_dao = ms.reconstruct(corrected, cfg_est, blocks=s.blocks, iterations=s.iterations)
         dao = ms.reconstruct(corrected, cfg_est, method="wave", blocks=s.blocks,
                              iterations=s.iterations)
+        clock.lap("reconstruct")
         steps.update()
-        frames = np.concatenate([c.frames for c in caps])
-        kymo = _kymograph(frames, cfg, cap.scan_order, s.stride, correct=True)
-        kymo_raw = _kymograph(frames, cfg, cap.scan_order, s.stride, correct=False)
-        kymo_static = _kymograph(np.concatenate([static.frames] * s.periods), cfg,
-                                 cap.scan_order, s.stride, correct=False)
+        frames, ring = np.concatenate([c.frames for c in caps]), est.amplitude > 0
+        kymos = {"static reference": _kymograph(np.concatenate([static.frames] * s.periods), cfg,
+                                                cap.scan_order, s.stride, False, ring),
+                 "no motion correction": _kymograph(frames, cfg, cap.scan_order, s.stride,
+                                                    False, ring),
+                 "motion-corrected": _kymograph(frames, cfg, cap.scan_order, s.stride, True,
+                                                ring)}
+        clock.lap("kymographs")
         steps.update()
-
         truth = cap.truth
-        rng = float(truth.max() - truth.min())
         images = {"2D sensor": cap.sensor2d, "meta-imaging, no DAO": np.asarray(no_dao.image),
                   "meta-imaging + DAO": np.asarray(dao.image)}
-        rows = [{"sensor": k, "psnr_db": psnr(truth=truth, image=v, data_range=rng)}
+        rows = [{"sensor": k, "psnr_db": psnr(truth=truth, image=v,
+                                              data_range=float(np.ptp(truth)))}
                 for k, v in images.items()]
         resid = _residuals(dao, turb, n, s.blocks)
-        lat_static = _lattice(kymo_static, cfg.scan)
-        kymo_stats = {"lattice_corrected_over_static": _lattice(kymo, cfg.scan) / lat_static,
-                      "lattice_uncorrected_over_static": _lattice(kymo_raw, cfg.scan) / lat_static}
-        lo, hi = float(truth.min()), float(truth.max())
-        panel = [("ground truth", truth)] + [(k, np.clip(v, lo, hi)) for k, v in images.items()]
-        figs = {"full field": save_panel(out / "full_field.png", panel, ncols=4,
-                                         suptitle=f"Moon through turbulence, D/r0 = {s.d_over_r0}")}
-        figs["kymographs"] = save_panel(out / "kymographs.png", [
-            ("static reference", kymo_static), ("no motion correction", kymo_raw),
-            ("motion-corrected", kymo)], ncols=3,
-            suptitle="kymographs (time down, position across)")
-        figs["pupil"] = save_panel(out / "pupil.png", [("angular intensity", est.intensity),
-                                                       ("binary pupil", est.amplitude)], ncols=2,
-                                   suptitle=f"estimated obstruction {est.obstruction:.3f} "
-                                            f"(true {s.obstruction})")
+        lat = {k: _lattice(v, cfg.scan) for k, v in kymos.items()}
         summary = {
             "scenario": "telescope", "table": rows,
             "dao_gain_db": rows[2]["psnr_db"] - rows[1]["psnr_db"],
             "dao_over_2d_db": rows[2]["psnr_db"] - rows[0]["psnr_db"],
             "pupil": {"true_obstruction": s.obstruction, "estimated_obstruction": est.obstruction,
                       "error": abs(est.obstruction - s.obstruction), "blur_views": est.blur},
-            "wavefront_residual_rms_waves": resid, "residual_max_waves": float(resid.max()),
-            "true_rms_waves_mean": float(np.mean([np.sqrt((turb.mean_zernike(n)[3:] ** 2).sum())])),
-            "kymograph": kymo_stats,
+            "motion_corrected_fraction": float(np.mean(corrected != views)),
+            "wavefront_residual_rms_waves": resid["mean"],
+            "residual_max_waves": float(resid["mean"].max()),
+            "residual_reference_frame_waves": resid["reference"],
+            "true_rms_waves": resid["true_mean"],
+            "kymograph": {"lattice_static": lat["static reference"],
+                          "lattice_corrected_over_static":
+                              lat["motion-corrected"] / lat["static reference"],
+                          "lattice_uncorrected_over_static":
+                              lat["no motion correction"] / lat["static reference"]},
             "turbulence": {"d_over_r0": s.d_over_r0, "layers": [
                 {"weight": x.weight, "wind_d_per_frame": x.wind, "spread_d": x.spread}
                 for x in turb.layers], "outer_scale": turb.outer_scale, "seed": s.seed},
             "settings": {"size": s.size, "blocks": s.blocks, "periods": s.periods,
-                         "stride": s.stride, "snr_db": s.snr_db},
+                         "stride": s.stride, "snr_db": s.snr_db, "key_every": s.key_every,
+                         "sim_subsample": s.sim_subsample},
+            "stage_seconds": clock.laps,
         }
+        figs = _figures(out, s, truth, images, kymos, est)
         return run.finish(summary, figs, "metasensor scenario: telescope (Fig. 5)")
