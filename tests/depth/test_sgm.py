@@ -13,12 +13,15 @@ from metasensor.depth.evaluate import score
 from metasensor.depth.scenes import benchmark_scene
 from metasensor.depth.sgm import _scan, normalise_costs, semi_global
 
+STEPS = {4: ((1, 0), (-1, 0), (0, 1), (0, -1)),
+         8: ((1, 0), (-1, 0), (0, 1), (0, -1), (1, 1), (1, -1), (-1, 1), (-1, -1))}
 
-def _reference(cost: np.ndarray, p1: float, p2: float) -> np.ndarray:
-    """Four-path SGM written pixel by pixel (Hirschmüller 2008, eq. 13)."""
+
+def _reference(cost: np.ndarray, p1: float, p2: float, paths: int) -> np.ndarray:
+    """SGM written pixel by pixel (Hirschmüller 2008, eq. 13)."""
     k, h, w = cost.shape
     total = np.zeros_like(cost)
-    for dy, dx in ((1, 0), (-1, 0), (0, 1), (0, -1)):
+    for dy, dx in STEPS[paths]:
         paths = np.zeros_like(cost)
         ys = range(h) if dy >= 0 else range(h - 1, -1, -1)
         for y in ys:
@@ -41,12 +44,14 @@ def _reference(cost: np.ndarray, p1: float, p2: float) -> np.ndarray:
     return total
 
 
-def test_semi_global_matches_the_recursion_and_its_row_blocks():
+@pytest.mark.parametrize("paths", [4, 8])
+def test_semi_global_matches_the_recursion_and_its_row_blocks(paths):
     rng = np.random.default_rng(0)
     cost = rng.random((5, 7, 6)).astype(np.float32)
-    ref = _reference(cost.astype(np.float64), 0.2, 0.7)
+    ref = _reference(cost.astype(np.float64), 0.2, 0.7, paths)
     for rows in (2, 3, 256):
-        got = semi_global(torch.from_numpy(cost), SemiGlobal(0.2, 0.7), rows=rows).numpy()
+        got = semi_global(torch.from_numpy(cost), SemiGlobal(0.2, 0.7, paths),
+                          rows=rows).numpy()
         np.testing.assert_allclose(got, ref, rtol=1e-5, atol=1e-5)
     assert torch.get_num_threads() == 1  # restored (the depth conftest sets one thread)
 
@@ -83,10 +88,11 @@ def test_scan_adds_into_total_and_leaves_the_costs():
     assert torch.equal(total[:, :, 0], 1 + cost[:, :, 0])  # a path starts with the cost
 
 
-@pytest.mark.parametrize("p1,p2", [(0.5, 0.5), (0.0, 1.0), (0.3, float("inf")), ("a", 1.0)])
-def test_semi_global_penalties_are_validated(p1, p2):
-    with pytest.raises(ValueError, match="p1|p2"):
-        SemiGlobal(p1, p2)
+@pytest.mark.parametrize("p1,p2,paths", [(0.5, 0.5, 4), (0.0, 1.0, 4), (0.3, float("inf"), 4),
+                                         ("a", 1.0, 4), (0.3, 0.5, 6)])
+def test_semi_global_penalties_are_validated(p1, p2, paths):
+    with pytest.raises(ValueError, match="p1|p2|paths"):
+        SemiGlobal(p1, p2, paths)
 
 
 def test_estimate_depth_refuses_other_smoothing():

@@ -34,16 +34,21 @@ class SemiGlobal:
 
     p1 : penalty for a change of the disparity by one candidate step between neighbours.
     p2 : penalty for a larger jump (a depth edge); ``0 < p1 < p2``.
+    paths : scan lines through each pixel: 4 (rows and columns, both ways) or 8 (and the
+        diagonals).
     """
 
     p1: float = 0.3
     p2: float = 0.5
+    paths: int = 4
 
     def __post_init__(self) -> None:
         for name in ("p1", "p2"):
             value = getattr(self, name)
             if not (isinstance(value, int | float) and 0 < value < float("inf")):
                 raise ValueError(f"{name} must be a positive number, got {value!r}")
+        if self.paths not in (4, 8):
+            raise ValueError(f"paths must be 4 or 8, got {self.paths!r}")
         if self.p1 >= self.p2:
             raise ValueError(f"p1 must be below p2, got p1={self.p1!r}, p2={self.p2!r}")
 
@@ -64,10 +69,22 @@ def normalise_costs(cost: torch.Tensor, noise: float = 2.0) -> torch.Tensor:
     return mean
 
 
+def _shifted(prev: torch.Tensor, shift: int) -> torch.Tensor:
+    """``prev[:, x - shift]`` along the last axis; zeros where that falls outside (a zero
+    predecessor starts the path there: ``L = C``)."""
+    out = torch.zeros_like(prev)
+    if shift > 0:
+        out[:, shift:] = prev[:, :-shift]
+    else:
+        out[:, :shift] = prev[:, -shift:]
+    return out
+
+
 def _scan(cost: torch.Tensor, total: torch.Tensor, dim: int, reverse: bool, p1: float,
-          p2: float) -> None:
+          p2: float, shift: int = 0) -> None:
     """Add one path's costs ``L`` along ``dim`` (1: down the rows, 2: along the columns) into
-    ``total``; both ``(K, H, W)``."""
+    ``total``; both ``(K, H, W)``. ``shift`` (rows only): the predecessor of ``(y, x)`` is
+    ``(y ∓ 1, x − shift)``, a diagonal path."""
     n = cost.shape[dim]
     order = range(n - 1, -1, -1) if reverse else range(n)
     prev = None
@@ -76,6 +93,8 @@ def _scan(cost: torch.Tensor, total: torch.Tensor, dim: int, reverse: bool, p1: 
         if prev is None:
             cur = c.clone()
         else:
+            if shift:
+                prev = _shifted(prev, shift)
             low = prev.amin(dim=0)
             best = torch.minimum(prev, (low + p2)[None])
             torch.minimum(best[:-1], prev[1:] + p1, out=best[:-1])
@@ -100,15 +119,18 @@ def semi_global(cost: torch.Tensor, penalties: SemiGlobal = SemiGlobal(),
     if cost.device.type == "cpu":  # thousands of small steps: threads only add overhead
         torch.set_num_threads(1)
     try:
-        _all_lines(cost, total, p1, p2, rows)
+        _all_lines(cost, total, p1, p2, rows, penalties.paths)
     finally:
         torch.set_num_threads(threads)
     return total
 
 
-def _all_lines(cost, total, p1: float, p2: float, rows: int) -> None:
+def _all_lines(cost, total, p1: float, p2: float, rows: int, paths: int) -> None:
     for reverse in (False, True):
         _scan(cost, total, 1, reverse, p1, p2)
+        if paths == 8:
+            for shift in (1, -1):
+                _scan(cost, total, 1, reverse, p1, p2, shift=shift)
     for start in range(0, cost.shape[1], rows):
         block = cost[:, start:start + rows].transpose(1, 2).contiguous()  # (K, W, B)
         acc = torch.zeros_like(block)
