@@ -2,9 +2,11 @@
 semiglobal matching and mutual information", TPAMI 2008), for the light-field cost of
 :class:`metasensor.depth.cost.CostVolume`.
 
-Every pixel's cost curve is first divided by its own mean over the candidates, so each pixel
-casts one vote whatever its texture contrast (a high-contrast background must not outvote a thin
-foreground bar). Along each of four scan lines (left/right, up/down) the path cost is
+Every pixel's cost curve is first divided by its own mean over the candidates plus a noise
+floor (:func:`normalise_costs`), so each textured pixel casts one vote whatever its contrast (a
+high-contrast background must not outvote a thin foreground bar) and an untextured one almost
+none. Along each scan line (left/right, up/down; optionally the four diagonals) the
+path cost is
 
     L(p, k) = C(p, k) + min(L(p−r, k), L(p−r, k±1) + P1, min_j L(p−r, j) + P2) − min_j L(p−r, j)
 
@@ -15,8 +17,8 @@ radius (foreground fattening), and thin structures that the lines run along surv
 
 Hand-written: OpenCV's ``StereoSGBM`` computes its own two-image matching cost and cannot take a
 light-field cost volume; no maintained Python library runs SGM on a given volume. Memory: the
-normalised volume and the sum ``S``, each ``(K, H, W)`` float32, plus ``(K, W)`` or ``(K, H)``
-scratch per scan step.
+normalised volume and the sum ``S``, each ``(K, H, W)`` float32, plus a block of ``rows`` rows
+(two ``(K, W, rows)`` copies) for the horizontal lines.
 """
 
 from __future__ import annotations
@@ -107,7 +109,8 @@ def _scan(cost: torch.Tensor, total: torch.Tensor, dim: int, reverse: bool, p1: 
 def semi_global(cost: torch.Tensor, penalties: SemiGlobal = SemiGlobal(),
                 rows: int = 256) -> torch.Tensor:
     """Summed path costs ``S`` ``(K, H, W)`` of a cost volume ``(K, H, W)`` (candidates equally
-    spaced, first axis) over four scan lines; the winner ``argmin_k S`` is the SGM disparity.
+    spaced, first axis) over the scan lines of ``penalties.paths``; the winner ``argmin_k S``
+    is the SGM disparity.
     ``cost`` should already be normalised (:func:`normalise_costs`): the penalties are in its
     units. The horizontal lines run over blocks of ``rows`` rows, transposed so that every scan
     step reads contiguous memory."""
