@@ -26,8 +26,9 @@ def _detail(img, mask):
     return float(np.sqrt(np.mean(ndimage.laplace(img.astype(np.float64))[mask] ** 2)))
 
 
-def _check_walker(size, height, seed):
-    cap = walker_view((size, size), ORDER, 12, WalkerOptions(height=height, seed=seed))
+def _check_walker(size, height, seed, **options):
+    opt = WalkerOptions(height=height, seed=seed, **options)
+    cap = walker_view((size, size), ORDER, 12, opt)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         out, fmap = correct_motion(cap.view, ORDER, 12, return_fallback=True)
@@ -57,6 +58,14 @@ def test_walker_artefact_drops_to_the_static_level():
                                               (400, 250.0, 3)])
 def test_walker_artefact_more_scenes(size, height, seed):
     _check_walker(size, height, seed)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("options", [dict(speed=6.0), dict(speed=-1.0), dict(exposure=0.0)])
+def test_walker_faster_than_a_lenslet_reversed_unblurred(options):
+    """6 view px per frame (more than a lenslet between frames), walking the other way, no
+    motion blur."""
+    _check_walker(400, 200.0 if options.get("speed") == 6.0 else 250.0, 2, **options)
 
 
 def test_reference_upsample_is_the_cubic_spline_of_one_phase():

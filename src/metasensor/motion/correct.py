@@ -220,7 +220,7 @@ def correct_motion(view_image: np.ndarray, scan_order: Sequence | str | None,
     fmap = FallbackMap(*(np.zeros(view.shape, np.float32),) * 2, 0.0)
     if fallback is not False and moved is not None:
         opts = fallback if isinstance(fallback, FallbackOptions) else None
-        fmap = fallback_map(view, out, p, moved, opts)
+        fmap = fallback_map(view, out, p, order[ref], moved, opts)
         out = blend(view, out, fmap, p, order[ref])
     return (out, fmap) if return_fallback else out
 
@@ -244,7 +244,8 @@ def plan_motion(view: np.ndarray, scan_order: Sequence | str | None,
     plan = MotionPlan(motion, p, scatter=scatter)
     if fallback is not False:
         opts = fallback if isinstance(fallback, FallbackOptions) else None
-        plan.with_fallback(fallback_map(view, plan.apply(view), p, moved, opts), order[ref])
+        fmap = fallback_map(view, plan.apply(view), p, order[ref], moved, opts)
+        plan.with_fallback(fmap, order[ref])
     return plan
 
 

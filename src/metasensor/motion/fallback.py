@@ -19,8 +19,10 @@ rows and along columns (the smaller of the two): near 0 or below for a static sc
 repeats along one axis only), positive where a mover's samples are misplaced. The moving
 region is the coherent lenslets connected to lenslets where the flow moved samples (motion
 evidence from two sides); inside it the fallback weight rises with the coherence left in the
-corrected image. The correction itself is the paper's optical-flow motion correction (Wu et al.,
-Nature 612, 62-71, 2022, Methods), :mod:`.correct`.
+corrected image, and where the corrected image disagrees with the reference frame alone in the
+band both resolve by more than the static scene's aliasing does (a sample moved to the wrong
+place, occluded or uncovered at the reference time). The correction itself is the paper's
+optical-flow motion correction (Wu et al., Nature 612, 62-71, 2022, Methods), :mod:`.correct`.
 
 Hand-written: the test is specific to the scan's sample lattice. The B-spline prefilter is
 scipy's (:func:`scipy.ndimage.spline_filter`); its separable evaluation at the ``p`` fixed
@@ -55,6 +57,11 @@ class FallbackOptions:
         for a lenslet to count as moving (motion evidence besides the coherence); the moving
         region is every coherent lenslet connected to such lenslets (gaps of up to ``bridge``
         lenslets bridged), grown by ``margin`` lenslets.
+    residual : the corrected image must also agree with the reference frame alone in the band
+        both resolve: their difference, Gaussian-smoothed over ``residual_window`` lenslets,
+        is compared with the same difference of the view far from the moving region (its
+        ``residual_quantile`` percentile: the static scene's aliasing); from ``residual[0]``
+        times that tolerance the fallback weight rises, reaching 1 at ``residual[1]`` times.
     warn_share : warn once when more than this share of the moving region fell back.
     """
 
@@ -66,6 +73,9 @@ class FallbackOptions:
     flow_share: float = 0.5
     bridge: int = 1
     margin: int = 1
+    residual: tuple[float, float] = (1.0, 2.0)
+    residual_window: float = 0.6
+    residual_quantile: float = 99.0
     warn_share: float = 0.5
 
     def __post_init__(self):
@@ -79,6 +89,10 @@ class FallbackOptions:
             raise ValueError(f"region must lie in (0, 1], got {self.region!r}")
         if self.window <= 0 or self.highpass <= 0:
             raise ValueError("window and highpass must be positive")
+        if not (len(self.residual) == 2 and 0 < self.residual[0] < self.residual[1]):
+            raise ValueError(f"residual must be two numbers 0 < a < b, got {self.residual!r}")
+        if not (self.residual_window > 0 and 0 < self.residual_quantile <= 100):
+            raise ValueError("residual_window must be positive and residual_quantile in (0, 100]")
         for name in ("bridge", "margin"):
             v = getattr(self, name)
             if not (isinstance(v, int) and 0 <= v <= 8):
@@ -227,14 +241,30 @@ def _smooth_pixels(a: np.ndarray, shape: tuple[int, int], p: int) -> np.ndarray:
     return out
 
 
-def fallback_map(view: np.ndarray, corrected: np.ndarray, period: int, flow_moved: np.ndarray,
+def _residual_weight(view, corrected, period, phase, gate, opt) -> np.ndarray:
+    """Fallback weight ``(H, W)`` from the disagreement of ``corrected`` with the reference
+    frame alone in their common band (:class:`FallbackOptions` ``residual``)."""
+    ref = reference_upsample(view, period, phase).astype(np.float64)
+    sigma = opt.residual_window * period
+    d_view = np.abs(ndimage.gaussian_filter(np.asarray(view, np.float64) - ref, sigma))
+    d_corr = np.abs(ndimage.gaussian_filter(np.asarray(corrected, np.float64) - ref, sigma))
+    far = ~ndimage.binary_dilation(gate > 0, iterations=2 * period)
+    sample = d_view[far] if far.sum() >= 1000 else d_view.ravel()
+    tol = max(float(np.percentile(sample, opt.residual_quantile)), 1e-12)
+    lo, hi = opt.residual
+    wgt = np.clip((d_corr / tol - lo) / (hi - lo), 0.0, 1.0)
+    return ndimage.gaussian_filter(wgt, 0.7 * period)
+
+
+def fallback_map(view: np.ndarray, corrected: np.ndarray, period: int,
+                 phase: tuple[int, int], flow_moved: np.ndarray,
                  options: FallbackOptions | None = None) -> FallbackMap:
     """Decide where the corrected view falls back to the reference frame alone.
 
     Parameters
     ----------
     view, corrected : (H, W) realigned view and its flow-corrected version.
-    period : scan period p.
+    period : scan period p. phase : (r, c), the reference frame's scan phase.
     flow_moved : (T, h, w) bool, samples that the flow moved by at least the motion threshold
         [view px] (each frame on its sub-image grid; :func:`.flow.sub_images`).
     options : :class:`FallbackOptions` (None: defaults).
@@ -266,6 +296,10 @@ def fallback_map(view: np.ndarray, corrected: np.ndarray, period: int, flow_move
     gate = _smooth_pixels(region.astype(np.float64), shape, period)
     weight = np.clip((left - opt.low) / (opt.high - opt.low), 0.0, 1.0)
     weight = _smooth_pixels(weight, shape, period) * gate
+    if gate.any():
+        residual = _residual_weight(view, corrected, period, phase, gate, opt)
+        weight = np.maximum(weight, np.clip(residual, 0.0, 1.0) * gate)
+        weight[weight < 0.01] = 0.0
     moving = gate > 0.5
     fraction = float((weight[moving] > 0.5).mean()) if moving.any() else 0.0
     if fraction > opt.warn_share:
