@@ -16,7 +16,15 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-__all__ = ["SystemConfig", "ConfigError", "say_fallbacks"]
+from metasensor.config_text import (
+    ConfigError,
+    note_fallbacks,
+    parse_text,
+    say_fallbacks,
+    toml_value,
+)
+
+__all__ = ["SystemConfig", "ConfigError", "say_fallbacks", "toml_value"]
 
 _APERTURES = ("circular", "square")
 # physically meaningful ranges (lengths in metres): optical wavelengths from the UV to the
@@ -28,71 +36,6 @@ MAX_NNUM = 63  # pixels per lenslet (the prototype: 15)
 MAX_NA = 0.95  # image-side numerical aperture (the prototype: 0.05)
 _MOVING = ("mla", "image")
 _APODIZATIONS = ("none", "aplanatic")
-
-
-# optics a TOML should set for its own system; missing ones fall back to the prototype's
-FALLBACK_FIELDS = ("mla_pitch", "mla_focal", "wavelength", "na")
-_PENDING: dict[str, str] = {}  # optical digest -> the note not said yet
-_SAID: set[str] = set()
-
-
-def _note_fallbacks(path: Path, text: str, cfg: SystemConfig) -> None:
-    """Remember which optics ``path`` leaves to the prototype's defaults (a reconstruction
-    with another system's optics looks plausible); :func:`say_fallbacks` says it once."""
-    table = tomllib.loads(text)
-    table = table.get("system", table)
-    missing = [k for k in FALLBACK_FIELDS if k not in table]
-    key = str(Path(path).resolve())
-    if missing and key not in _SAID:
-        _SAID.add(key)
-        proto = SystemConfig()
-        values = ", ".join(f"{k} = {getattr(proto, k)!r}" for k in missing)
-        _PENDING[cfg.optical_digest()] = (f"note: {path} does not set {', '.join(missing)}; "
-                                          f"using the prototype's ({values})")
-
-
-def say_fallbacks(cfg: SystemConfig | None = None) -> None:
-    """Print, once, on stderr, the note of a configuration file read by
-    :meth:`SystemConfig.from_toml` that left optics to the prototype: for ``cfg``'s optics
-    (called where optics are used, e.g. PSF generation), or all pending ones (None; the CLI
-    calls it when a command has finished)."""
-    import sys
-
-    keys = list(_PENDING) if cfg is None else [cfg.optical_digest()]
-    for key in keys:
-        note = _PENDING.pop(key, None)
-        if note is not None:
-            print(note, file=sys.stderr)
-
-
-class ConfigError(ValueError):
-    """An impossible or inconsistent system parameter (one line, naming the parameter)."""
-
-
-def _parse(loads, error: type[Exception], text: str, what: str) -> Any:
-    """``loads(text)``, its syntax errors (and text nested thousands deep) as one ConfigError
-    line ``invalid <what>: ...``."""
-    try:
-        return loads(text)
-    except error as exc:
-        raise ConfigError(f"invalid {what}: {exc}") from None
-    except RecursionError:
-        raise ConfigError(f"invalid {what}: nested too deeply") from None
-
-
-def toml_value(value: Any) -> str:
-    """One TOML value (bool, int, float with exact repr, str, list): scalars written by
-    ``tomli_w``, arrays kept on one line (tomli_w puts every item on its own line);
-    ConfigError for non-finite numbers and other types."""
-    import tomli_w
-
-    if isinstance(value, (tuple, list)):
-        return "[" + ", ".join(toml_value(v) for v in value) + "]"
-    if isinstance(value, float) and not math.isfinite(value):
-        raise ConfigError(f"cannot write non-finite value {value!r} to TOML")
-    if not isinstance(value, (bool, int, float, str)):
-        raise ConfigError(f"cannot write value of type {type(value).__name__} to TOML")
-    return tomli_w.dumps({"v": value}).strip().removeprefix("v = ")
 
 
 @dataclass(frozen=True)
@@ -372,7 +315,7 @@ class SystemConfig:
     def from_json(cls, text: str) -> SystemConfig:
         """Configuration from JSON: a config's own ``to_json`` or a view stack's description,
         whose extras under the ``"metasensor"`` key (io.views) are not system parameters."""
-        data = _parse(json.loads, json.JSONDecodeError, text, "JSON configuration")
+        data = parse_text(json.loads, json.JSONDecodeError, text, "JSON configuration")
         if not isinstance(data, dict):
             raise ConfigError(f"JSON configuration must be an object, got {type(data).__name__}")
         return cls.from_dict(data)
@@ -387,7 +330,7 @@ class SystemConfig:
 
     @classmethod
     def from_toml_string(cls, text: str) -> SystemConfig:
-        data = _parse(tomllib.loads, tomllib.TOMLDecodeError, text, "TOML")
+        data = parse_text(tomllib.loads, tomllib.TOMLDecodeError, text, "TOML")
         table = data.get("system", data)
         if not isinstance(table, dict):
             raise ConfigError(f"'system' must be a TOML table, got {table!r:.40}")
@@ -416,7 +359,7 @@ class SystemConfig:
             cfg = cls.from_toml_string(text)
         except ConfigError as exc:
             raise ConfigError(f"config {path}: {exc}") from None
-        _note_fallbacks(path, text, cfg)
+        note_fallbacks(path, text, cfg)
         return cfg
 
     def digest(self) -> str:
