@@ -80,7 +80,7 @@ def coarse_fine_widefield(original):
     pixel; a ~1,400-px blur loses nothing at that scale)."""
 
     def fine_widefield(cfg, zernike=None, depth=0.0, phase=None, device=None):
-        from metasensor.optics.psf import widefield_psf
+        from metasensor.optics.widefield import widefield_psf
         from metasensor.simulation import kernels as kern
 
         k = kern._widefield_size(cfg, zernike, depth, phase, cfg.pixel_pitch / 3)

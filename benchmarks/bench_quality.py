@@ -103,7 +103,7 @@ def restore_2d(cap, cfg, zernike=None) -> tuple[np.ndarray, float]:
     """The 2D sensor's image deconvolved by its widefield PSF with the hyper-Laplacian prior
     (the best of :data:`HL_LAMBDAS` by SSIM to the truth) and that lam."""
     from metasensor.metrics import ssim
-    from metasensor.optics.psf import widefield_psf
+    from metasensor.optics.widefield import widefield_psf
     from metasensor.solvers.krishnan_fergus import KFOptions, hyper_laplacian_deconv
 
     psf = widefield_psf(cfg, zernike=zernike)

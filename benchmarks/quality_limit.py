@@ -114,7 +114,7 @@ def wiener_meta(cap, bank: np.ndarray, prior: np.ndarray, idx, bins, freq) -> di
 
 def wiener_2d(cap, prior: np.ndarray, idx, bins, freq) -> dict:
     """Expected linear-MMSE error ratio of the 2D sensor (same lens, in focus)."""
-    from metasensor.optics.psf import widefield_psf
+    from metasensor.optics.widefield import widefield_psf
 
     h, w = cap.truth.shape
     psf = widefield_psf(cap.config)

@@ -18,7 +18,7 @@ _EXPORTS = {
     "SystemConfig": "metasensor.config",
     "ConfigError": "metasensor.config",
     "view_psfs": "metasensor.optics.psf",
-    "widefield_psf": "metasensor.optics.psf",
+    "widefield_psf": "metasensor.optics.widefield",
     "realign": "metasensor.sensor.realign",
     "unrealign": "metasensor.sensor.realign",
     "scan_order": "metasensor.sensor.scan",

@@ -6,8 +6,9 @@ from scipy.special import j0, j1
 
 from metasensor.config import SystemConfig
 from metasensor.optics import cache as psf_cache
-from metasensor.optics.psf import view_psfs, widefield_psf
+from metasensor.optics.psf import view_psfs
 from metasensor.optics.pupil import disk_fraction
+from metasensor.optics.widefield import widefield_psf
 from metasensor.optics.zernike import zernike_basis
 
 

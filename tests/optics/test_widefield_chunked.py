@@ -5,6 +5,7 @@ import pytest
 import torch
 
 import metasensor.optics.psf as psf_mod
+import metasensor.optics.widefield as wf_mod
 from metasensor.config import SystemConfig
 from metasensor.optics.coherent import (
     binned_intensity_mft,
@@ -38,15 +39,15 @@ def test_widefield_psf_takes_the_chunked_path_above_the_memory_limit(monkeypatch
     # With the limit lowered below this grid's size the result is unchanged (< 1e-6 relative)
     z = np.zeros(12)
     z[4] = 0.6
-    ref = psf_mod.widefield_psf(CFG, z, size=41)
-    monkeypatch.setattr(psf_mod, "WIDEFIELD_FFT_BYTES", 1024)
+    ref = wf_mod.widefield_psf(CFG, z, size=41)
+    monkeypatch.setattr(wf_mod, "WIDEFIELD_FFT_BYTES", 1024)
     calls = []
 
     def spy(*args, **kw):
         calls.append(args[-2])
         return binned_intensity_mft(*args, **kw)
 
-    monkeypatch.setattr(psf_mod, "binned_intensity_mft", spy)
-    got = psf_mod.widefield_psf(CFG, z, size=41)
+    monkeypatch.setattr(wf_mod, "binned_intensity_mft", spy)
+    got = wf_mod.widefield_psf(CFG, z, size=41)
     assert len(calls) == 1
     assert np.abs(got - ref).max() < 1e-6 * ref.max()

@@ -1,4 +1,5 @@
-"""Wave-optics PSFs: the coded-MLA phase-space PSF bank and the conventional widefield PSF.
+"""Wave-optics PSFs: the coded-MLA phase-space PSF bank (the widefield PSF of a 2D sensor behind
+the same lens is in :mod:`metasensor.optics.widefield`).
 
 Hand-written (Wu et al. 2022, Methods; docs/conventions.md): no library models a microlens-array
 sensor.
@@ -42,59 +43,18 @@ from metasensor.backend import check_memory, resolve_device
 from metasensor.config import SystemConfig, say_fallbacks
 from metasensor.optics import cache as _cache
 from metasensor.optics.coherent import (
-    binned_intensity_mft,
     next_fast_odd,
     plan_field,
     point_field,
     pupil_samples,
 )
+from metasensor.optics.psf_args import check_config, check_depth, check_odd, check_zernike
 from metasensor.optics.pupil import PupilFn, disk_fraction, pupil_amplitude, pupil_phase
 
-__all__ = ["view_psfs", "widefield_psf", "PSF_CODE_VERSION", "ENERGY_CUT"]
+__all__ = ["view_psfs", "PSF_CODE_VERSION", "ENERGY_CUT"]
 
 PSF_CODE_VERSION = "psf-1"
 ENERGY_CUT = 0.005  # default windows keep >= 99.5 % of the energy
-# widefield fields above this many bytes (complex128) are formed by row-chunked MFT instead
-# (a 3-wave lens needs ~20,000² samples: 6 GB per array by FFT)
-WIDEFIELD_FFT_BYTES = 1 << 30
-
-
-# ----------------------------------------------------------------------------- checks
-def _check_config(cfg) -> None:
-    if not isinstance(cfg, SystemConfig):
-        raise TypeError(f"cfg must be a SystemConfig, got {type(cfg).__name__}")
-
-
-def _check_zernike(zernike) -> np.ndarray | None:
-    if zernike is None:
-        return None
-    try:
-        z = np.asarray(zernike, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise TypeError(f"zernike must be a 1-D Noll vector of numbers (waves), got "
-                        f"{zernike!r:.60}") from None
-    if z.ndim != 1 or z.size == 0:
-        raise ValueError(f"zernike must be a 1-D Noll coefficient vector, got shape {z.shape}")
-    if not np.isfinite(z).all():
-        raise ValueError("zernike contains NaN or infinite values")
-    return z
-
-
-def _check_odd(value, name: str) -> int | None:
-    if value is None:
-        return None
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1 \
-            or value % 2 == 0:
-        raise ValueError(f"{name} must be a positive odd integer, got {value!r}")
-    return int(value)
-
-
-def _check_depth(depth) -> float:
-    if isinstance(depth, bool) or not isinstance(depth, (int, float, np.floating)) \
-            or not math.isfinite(depth):
-        raise ValueError(f"depth must be a finite number of metres, got {depth!r}")
-    return float(depth)
-
 
 # ----------------------------------------------------------------------------- helpers
 def _reference_pupil(cfg: SystemConfig, zernike, depth: float, phase: PupilFn | None,
@@ -238,14 +198,14 @@ def view_psfs(cfg: SystemConfig, zernike=None, depth: float = 0.0, *,
         pixel's flux (as with ``subsample``). Needs ``subsample = 1``. Positions between the
         simulation samples are reached by a Fourier shift of the point's field.
     """
-    _check_config(cfg)
+    check_config(cfg)
     say_fallbacks(cfg)
-    z = _check_zernike(zernike)
-    depth = _check_depth(depth)
-    sub = _check_odd(subsample, "subsample")
-    size = _check_odd(size, "size")
+    z = check_zernike(zernike)
+    depth = check_depth(depth)
+    sub = check_odd(subsample, "subsample")
+    size = check_odd(size, "size")
     npts = _check_points(cfg, points, sub)
-    os_ = _check_odd(oversample, "oversample") or _default_oversample(cfg, sub)
+    os_ = check_odd(oversample, "oversample") or _default_oversample(cfg, sub)
     if os_ % sub:
         raise ValueError(f"oversample {os_} must be a multiple of subsample {sub}")
     dev = resolve_device(device)
@@ -291,6 +251,8 @@ def _default_size(cfg, z, depth, phase, amplitude, gmax, dev) -> int:
 
     p = cfg.pixel_pitch
     npix = 2 * math.ceil((_ray_reach(cfg, gmax) + 30.0 * cfg.wavelength / cfg.na) / p) + 1
+    from metasensor.optics.widefield import _widefield_pixels
+
     pix, _ = _widefield_pixels(cfg, z, depth, phase, amplitude, p, npix, gmax, dev)
     c = cfg.nnum // 2
     t = (np.arange(cfg.nnum) - c) * p / (cfg.lenslet_diameter / 2)
@@ -422,56 +384,11 @@ def _bin(inten: torch.Tensor, k: int) -> torch.Tensor:
     return acc
 
 
-# ----------------------------------------------------------------------------- widefield
-def widefield_psf(cfg: SystemConfig, zernike=None, depth: float = 0.0, sampling=None, *,
-                  phase: PupilFn | None = None, amplitude=None, size: int | None = None,
-                  device=None) -> np.ndarray:
-    """PSF of a conventional 2D sensor behind the same lens: (K, K) float32.
+def __getattr__(name: str):
+    """``widefield_psf`` lives in :mod:`metasensor.optics.widefield`; importing it from here
+    still works."""
+    if name == "widefield_psf":
+        from metasensor.optics.widefield import widefield_psf
 
-    Each value is the fraction of a unit point's photons on a pixel of side ``sampling``
-    (default ``cfg.pixel_pitch``) [m], centre index ``K // 2`` = the point; the sum is the
-    fraction of light on the K×K window (≈ 1 for the clear pupil). Same pupil arguments as
-    :func:`view_psfs`. ``size`` None: smallest odd K keeping >= 99.5 % of the energy.
-    """
-    _check_config(cfg)
-    say_fallbacks(cfg)
-    z = _check_zernike(zernike)
-    depth = _check_depth(depth)
-    size = _check_odd(size, "size")
-    if sampling is None:
-        sampling = cfg.pixel_pitch
-    if isinstance(sampling, bool) or not isinstance(sampling, (int, float, np.floating)) \
-            or not (math.isfinite(sampling) and sampling > 0):
-        raise ValueError(f"sampling must be a positive pixel size in metres, got {sampling!r}")
-    dev = resolve_device(device)
-    gmax = _reference_pupil(cfg, z, depth, phase, amplitude)[2]
-    if size is None:  # search window: the ray bundle plus 30 λ/NA
-        reach = _ray_reach(cfg, gmax) + 30.0 * cfg.wavelength / cfg.na
-        npix = 2 * math.ceil(reach / sampling) + 1
-    else:
-        npix = size
-    pix, total = _widefield_pixels(cfg, z, depth, phase, amplitude, sampling, npix, gmax, dev)
-    if size is None:
-        size, _ = _window_size(pix, 1, npix, total=total)
-    return np.ascontiguousarray(_crop(pix, size), dtype=np.float32)
-
-
-def _widefield_pixels(cfg, z, depth, phase, amplitude, sampling, npix, gmax, dev):
-    """(npix, npix) float64 photon fractions on pixels of side ``sampling``, and the total
-    light reaching the image plane (sum A² / sum A0²)."""
-    lam_na = cfg.wavelength / cfg.na
-    os_ = 3
-    while sampling / os_ > 0.9 * lam_na / 4:  # sample the intensity (band 2NA/λ) at Nyquist
-        os_ += 2
-    dx = sampling / os_
-    n = npix * os_
-    plan = plan_field(cfg, n, dx, gmax)
-    if plan.method == "fft" and plan.pupil_n**2 * 16 > WIDEFIELD_FFT_BYTES:
-        plan = plan_field(cfg, n, dx, gmax, method="mft")  # row-chunked: bounded memory
-    a, w, norm = pupil_samples(cfg, plan, z, depth, phase, amplitude)
-    if plan.method == "mft" and n * n * 16 > WIDEFIELD_FFT_BYTES:
-        pix = binned_intensity_mft(cfg, plan, a, w, norm, n, dx, os_, dev).cpu().numpy()
-        return pix, float(np.sum(a**2) / norm)
-    u0 = point_field(cfg, plan, a, w, norm, n, dx, dev, dtype=torch.complex128)
-    pix = _bin(u0.real.square() + u0.imag.square(), os_).cpu().numpy()
-    return pix, float(np.sum(a**2) / norm)
+        return widefield_psf
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -25,7 +25,7 @@ def restore_2d(cap, zernike) -> np.ndarray:
     """``cap.sensor2d`` deconvolved by the widefield PSF of ``zernike`` (Noll, waves) with the
     hyper-Laplacian prior, the best of :data:`HL_LAMBDAS` by SSIM to ``cap.truth``."""
     from metasensor.metrics import ssim
-    from metasensor.optics.psf import widefield_psf
+    from metasensor.optics.widefield import widefield_psf
     from metasensor.solvers.krishnan_fergus import KFOptions, hyper_laplacian_deconv
 
     psf = widefield_psf(cap.config, zernike=np.asarray(zernike, np.float64))
