@@ -104,8 +104,8 @@ def test_single_frame_calibration_leaves_room_for_the_stage_steps():
     # from one frame the offsets are nominal: a 2-px margin keeps realign working when the
     # stage's actual step differs (phase (4, 4) displaced by 2 px here; with no margin realign
     # stopped: "lenslet blocks leave the sensor"); measured offsets keep every lenslet
-    from metasensor.sensor.calibrate import frame_offset
     from metasensor.sensor.rectify import rectify_frames
+    from metasensor.sensor.reuse import frame_offset
 
     white = ms.unrealign(pupil_views(), CFG, ORDER).astype(np.float32)
     assert calibrate(white[0], N, frames=white, scan=5).lenslets == (12, 12)

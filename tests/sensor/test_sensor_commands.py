@@ -68,8 +68,8 @@ def test_calibrate_then_realign(capture):
     # each frame's grid offset was measured by the CLI (the calibration had none): the views
     # match views rendered on the exact grid (continuous model, lf_synth) to >= 40 dB
     from metasensor.config import SystemConfig
-    from metasensor.sensor.calibrate import adapt
     from metasensor.sensor.rectify import flat_views
+    from metasensor.sensor.reuse import adapt
 
     cfg3 = SystemConfig(scan=3)
     cal3 = adapt(calib, 3, capture["order"])

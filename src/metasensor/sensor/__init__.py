@@ -16,7 +16,7 @@ _NAMES = {
     "unrealign": "realign", "realign_sequence": "realign",
     "lenslet_counts": "realign", "scan_order": "scan", "Calibration": "calibration",
     "find_grid": "calibrate", "flat_field": "calibrate",
-    "adapt": "calibrate", "frame_offset": "calibrate", "rectify_frame": "rectify",
+    "adapt": "reuse", "frame_offset": "reuse", "rectify_frame": "rectify",
     "rectify_frames": "rectify", "flat_views": "rectify",
 }
 

@@ -176,13 +176,13 @@ def realign_cmd(
             _check_period(raw, cfg, config, raw_path)
         stream = bars.enter_context(tqdm(raw, total=n_frames, desc="realign", unit="frame"))
         if calib is not None:
-            from metasensor.sensor.calibrate import adapt
+            from metasensor.sensor.reuse import adapt
 
             check_fits(calib, raw.shape[1:], cfg.nnum)
             calib = adapt(calib, cfg.scan, phases, moving)
             off = offsets if offsets != "calib" else None
             if offsets == "measure" and moving == "mla":
-                from metasensor.sensor.calibrate import frame_offset
+                from metasensor.sensor.reuse import frame_offset
 
                 def off(f, frame, phase):
                     return frame_offset(frame, calib, phase, index=f)
