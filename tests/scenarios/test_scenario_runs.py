@@ -81,3 +81,14 @@ def test_bar_gains_count_finer_groups_and_flag_bounds():
     assert bar_gains(sharp, lost)["centre"] == {"gain": 0.0, "bound": False}
     with pytest.raises(ValueError, match="no bar group"):
         bar_periods(chart, groups, exclude=(0, 256, 0, 256))
+
+
+def test_telescope_settings_are_validated():
+    from metasensor.scenarios.telescope import TelescopeSettings
+
+    assert TelescopeSettings().size >= 192  # 12 lenslets: what the views' motion correction needs
+    with pytest.raises(ValueError, match="size must be an integer >= 192"):
+        TelescopeSettings(size=180)
+    with pytest.raises(ValueError, match="check_iterations"):
+        TelescopeSettings(check_iterations=0)
+    assert TelescopeSettings(check_iterations=None).check_iterations is None
