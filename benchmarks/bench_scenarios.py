@@ -225,7 +225,7 @@ def telescope_simulation(quick: bool = False) -> dict:
         bank_s = {}
         for sub in (3, 1):
             c0 = time.process_time()
-            view_psfs(cfg, fz(0.5, 0.5)[0], 0.0, phase=screen_phase(screens[0]), subsample=sub,
+            view_psfs(cfg, fz(0.5, 0.5), 0.0, phase=screen_phase(screens[0]), subsample=sub,
                       cache=False)
             bank_s[sub] = time.process_time() - c0
         blocks = st.blocks[0] * st.blocks[1]
@@ -263,9 +263,16 @@ def telescope_simulation(quick: bool = False) -> dict:
             "demo_key_every": st.key_every, "demo_subsample": st.sim_subsample}
 
 
-def telescope_rows(quick: bool = False) -> list[dict]:
-    """The telescope demo's row (:func:`_scenario_rows` for it alone) and the simulation's."""
-    return _scenario_rows(quick, names=("telescope",)) + [telescope_simulation(quick)]
+def telescope_rows(quick: bool = False, save: bool = False) -> list[dict]:
+    """The simulation's row and the telescope demo's (:func:`_scenario_rows` for it alone);
+    ``save``: each put into the results JSON as soon as it is measured (:func:`merge_rows`)."""
+    rows = []
+    for make in (lambda: [telescope_simulation(quick)],
+                 lambda: _scenario_rows(quick, names=("telescope",))):
+        rows += make()
+        if save:
+            merge_rows(rows[-1:], quick)
+    return rows
 
 
 def merge_rows(rows: list[dict], quick: bool = False) -> Path:
@@ -302,8 +309,6 @@ if __name__ == "__main__":
     if "--telescope" in sys.argv:
         sys.path.insert(0, str(HERE))
         quick = "--quick" in sys.argv
-        rows = telescope_rows(quick)
-        print(json.dumps(rows, indent=1))
-        print(merge_rows(rows, quick))
+        print(json.dumps(telescope_rows(quick, save=True), indent=1))
     else:
         print(json.dumps(run(quick="--quick" in sys.argv), indent=1))
