@@ -237,3 +237,13 @@ def test_fill_gives_textureless_regions_the_surrounding_depth():
     # confident pixels are left as they were
     sure = raw.confidence >= 0.1
     np.testing.assert_array_equal(filled.disparity[sure], raw.disparity[sure])
+
+
+def test_views_smaller_than_the_fill_radius_run_with_default_settings():
+    # 12-px views (a small crop): the default fill radius shrinks to the views' side
+    views = np.random.default_rng(3).random((5, 5, 12, 12)).astype(np.float32)
+    cfg = ms.SystemConfig(nnum=5, mla_pitch=5 * 4.6e-6, mla_focal=5 * 46e-6, scan=1)
+    res = ms.estimate_depth(views, cfg)
+    assert res.disparity.shape == (12, 12) and np.isfinite(res.disparity).all()
+    with pytest.raises(ValueError, match="fill_radius"):
+        ms.estimate_depth(views, cfg, fill_radius=16)  # asked for explicitly: refused

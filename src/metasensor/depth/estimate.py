@@ -249,7 +249,7 @@ def estimate_depth(views, cfg: SystemConfig, calibration=None, *, candidates: in
                    occlusion: bool = True, radius: int = 4, eps: float = 0.01,
                    refine_iterations: int = 2, refine_radius: int | None = None,
                    fill: bool = True, fill_threshold: float = 0.1,
-                   fill_radius: int = 16, normalize: bool = True,
+                   fill_radius: int | None = None, normalize: bool = True,
                    smoothing: SemiGlobal | None = SemiGlobal(),
                    focal_length: float | None = None, focus_distance: float | None = None,
                    device=None, progress: bool = False) -> DepthResult:
@@ -271,7 +271,8 @@ def estimate_depth(views, cfg: SystemConfig, calibration=None, *, candidates: in
         the guided cost aggregation. ``refine_iterations``: Gauss–Newton steps (0 = parabola fit
         only), aggregated over ``refine_radius`` (None: ``radius``). ``fill``: replace pixels
         with confidence below ``fill_threshold`` by an edge-aware, confidence-weighted average
-        of the confident ones within ``fill_radius`` (``DepthResult.valid`` marks the others).
+        of the confident ones within ``fill_radius`` view px (None: 16, or the views' larger
+        side where they are smaller) (``DepthResult.valid`` marks the others).
     smoothing : :class:`metasensor.depth.sgm.SemiGlobal` penalties of the semi-global matching
         that decides at depth edges and thin structures (default), or None: the window
         aggregation alone.
@@ -280,6 +281,8 @@ def estimate_depth(views, cfg: SystemConfig, calibration=None, *, candidates: in
     if not isinstance(cfg, SystemConfig):
         raise TypeError(f"cfg must be a SystemConfig, got {type(cfg).__name__}")
     arr = _check_views(views, cfg)
+    if fill_radius is None:
+        fill_radius = min(16, max(arr.shape[2:]))
     mask = _check_settings(cfg, arr, candidates, radius, refine_iterations, refine_radius,
                            fill_radius, eps, disparity_range, view_mask, smoothing)
     n, c = cfg.nnum, cfg.center
