@@ -8,8 +8,7 @@ Public entry points are imported lazily, so ``import metasensor`` stays fast.
 
 from __future__ import annotations
 
-import importlib
-from typing import Any
+import importlib  # no other import here: a Ctrl-C while the command starts is caught after it
 
 __version__ = "0.1.0"
 
@@ -41,7 +40,7 @@ _SUBMODULES = ("optics", "sensor", "simulation", "recon", "motion", "depth", "me
 __all__ = sorted(_EXPORTS) + list(_SUBMODULES)
 
 
-def __getattr__(name: str) -> Any:
+def __getattr__(name: str) -> object:
     if name in _EXPORTS:
         module = importlib.import_module(_EXPORTS[name])
         value = getattr(module, name)

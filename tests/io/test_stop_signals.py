@@ -132,3 +132,23 @@ def test_a_command_started_with_ctrl_c_ignored_keeps_ignoring_it():
         assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN
     finally:
         signal.signal(signal.SIGINT, previous)
+
+
+def test_ctrl_c_while_the_command_loads_is_one_line(monkeypatch, capsys):
+    """A Ctrl-C before the command line has loaded (its handler not yet installed) ends the
+    command with one line and exit 130, not a traceback."""
+    from metasensor import launch
+
+    class Interrupted:  # the import of the command line is where the Ctrl-C lands
+        def find_spec(self, name, path=None, target=None):
+            if name == "metasensor.cli":
+                raise KeyboardInterrupt
+            return None
+
+    monkeypatch.delitem(sys.modules, "metasensor.cli", raising=False)
+    monkeypatch.setattr(sys, "meta_path", [Interrupted(), *sys.meta_path])
+    with pytest.raises(SystemExit) as stop:
+        launch.main()
+    assert stop.value.code == 130
+    err = capsys.readouterr().err
+    assert err.startswith("error: stopped by Ctrl-C") and err.count("\n") == 1, err
