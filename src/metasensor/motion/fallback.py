@@ -196,7 +196,10 @@ def reference_upsample(views: np.ndarray, period: int, phase: tuple[int, int],
 
     Cubic B-spline interpolation (exact at the samples, band-limited between them; scipy's
     ``mode="mirror"`` at the borders) of ``view[r::p, c::p]``, whose sample (i, j) sits at view
-    pixel ``(p·i + r, p·j + c)``.
+    pixel ``(p·i + r, p·j + c)``. It equals ``scipy.ndimage.map_coordinates(order=3,
+    mode="mirror")`` on that grid; the evaluation is hand-written as two sparse matrices (rows,
+    columns) built once and applied to every view of the stack, because the grid is separable
+    and the same for all views (timings: docs/decisions.md).
 
     Parameters
     ----------
