@@ -33,16 +33,10 @@ sys.path.insert(0, str(HERE.parent / "src"))
 
 
 def psf_bank(cfg):
-    """The library's PSF bank, or (before the optics stage lands) the tests' stand-in model."""
-    try:
-        from metasensor.optics.psf import view_psfs
+    """The library's PSF bank (an import error is an error, never a stand-in model)."""
+    from metasensor.optics.psf import view_psfs
 
-        return np.asarray(view_psfs(cfg), np.float32), "view_psfs"
-    except ImportError:
-        sys.path.insert(0, str(HERE.parent / "tests" / "recon"))
-        from recon_standin import standin_psfs
-
-        return standin_psfs(nnum=cfg.nnum), "standin"
+    return np.asarray(view_psfs(cfg), np.float32), "view_psfs"
 
 
 def _problem(lenslets: int, device):
