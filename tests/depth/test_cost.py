@@ -1,4 +1,5 @@
-"""Plane-sweep cost volume: bilinear resampling, minimum at the true disparity, view groups."""
+"""Plane-sweep cost volume: bilinear and cubic resampling, minimum at the true disparity, view
+groups."""
 
 import numpy as np
 import pytest
@@ -24,7 +25,7 @@ def _stack(n=5, shape=(40, 44), disparity=0.0, seed=0):
 
 def test_shifted_matches_scipy_linear_interpolation():
     views, au, av = _stack()
-    cv = CostVolume(views, au, av, centre=12, max_disparity=1.0)
+    cv = CostVolume(views, au, av, centre=12, max_disparity=1.0, resampling="linear")
     out = torch.empty(cv.shape)
     tmp = torch.empty((cv.shape[0] + 1, cv.shape[1]))
     for dy, dx in ((0.3, -1.7), (-2.0, 0.25), (1.5, 1.5), (0.0, 0.0)):
@@ -32,6 +33,35 @@ def test_shifted_matches_scipy_linear_interpolation():
         # sample at p + (dy, dx) = scipy's shift by −(dy, dx), linear (order 1), interior only
         ref = ndimage.shift(views[3].numpy().astype(np.float64), (-dy, -dx), order=1)
         np.testing.assert_allclose(got[4:-4, 4:-4], ref[4:-4, 4:-4], atol=1e-5)
+
+
+def test_shifted_cubic_matches_torch_bicubic_and_keeps_a_thin_bar():
+    views, au, av = _stack()
+    cv = CostVolume(views, au, av, centre=12, max_disparity=1.0)  # cubic by default
+    h, w = cv.shape
+    out = torch.empty(cv.shape)
+    tmp = torch.empty((h + 1) * (w + 3))
+    for dy, dx in ((0.3, -1.7), (-2.0, 0.25), (1.5, 1.5), (0.0, 0.0), (0.0, 0.6)):
+        got = cv.shifted(3, dy, dx, out, tmp) + views.mean()
+        ys = torch.arange(h, dtype=torch.float32)[:, None] + dy
+        xs = torch.arange(w, dtype=torch.float32)[None, :] + dx
+        grid = torch.stack([(2 * xs / (w - 1) - 1).expand(h, w),
+                            (2 * ys / (h - 1) - 1).expand(h, w)], dim=-1)[None]
+        ref = torch.nn.functional.grid_sample(views[3][None, None], grid, mode="bicubic",
+                                              align_corners=True)[0, 0]
+        np.testing.assert_allclose(got[4:-4, 4:-4], ref[4:-4, 4:-4], atol=1e-5)
+    # a one-sample bar shifted by half a sample: bilinear halves its contrast, cubic keeps more
+    bar = torch.zeros((1, 16, 16))
+    bar[0, :, 8] = 1.0
+    peaks = {}
+    for mode in ("linear", "cubic"):
+        cv = CostVolume(bar, [0.0], [0.0], centre=0, max_disparity=1.0, resampling=mode)
+        peaks[mode] = float(cv.shifted(0, 0.0, 0.5, torch.empty((16, 16)),
+                                       torch.empty(17 * 19)).max()) + float(bar.mean())
+    assert peaks["linear"] == pytest.approx(0.5)
+    assert peaks["cubic"] == pytest.approx(0.59375)  # Keys weight at half a sample, a = -0.75
+    with pytest.raises(ValueError, match="resampling"):
+        CostVolume(views, au, av, centre=12, max_disparity=1.0, resampling="sinc")
 
 
 @pytest.mark.parametrize("cost", ["variance", "sad"])
