@@ -7,8 +7,19 @@ content with the centre view if ``δ`` is right. Bilinear resampling at a fracti
 averages two neighbouring samples, blurring bars one or two view px wide into their background
 and making the cost depend on the fractional part of each view's shift; the four-tap cubic
 kernel keeps more of their contrast. The cost at ``p`` is the variance of the aligned views
-(``"variance"``, the maximum-likelihood photo-consistency under Gaussian noise) or their mean
-absolute difference to the centre view (``"sad"``).
+(``"variance"``, the maximum-likelihood photo-consistency under Gaussian noise), optionally plus
+``centre_weight`` times the squared difference between their mean and the centre view, or
+their mean absolute difference to the centre view (``"sad"``); ``"anchored"`` is the variance
+with ``centre_weight = 1`` (the mean squared difference to the centre view).
+
+Why a centre term: at a pixel whose lenslet footprint straddles an occluding edge (a front
+layer covering a share ``f`` of it), the half-pupil that sees the background clear matches the
+background in every view except those on the central row/column, which see the pixel's mix;
+the variance then gives the pixel to the background unless ``f`` is well above one half
+(about 0.64 for 9 x 9 views, by the two-layer model), while the truth is the layer at the pixel
+centre. The squared distance of the group mean to the centre view's own value grows at the
+wrong layer (the mix differs from the background by ``f`` times the layers' contrast) and
+moves that threshold towards one half, at the price of the centre view's noise in every cost.
 
 Occlusion: the views are accumulated in nine sectors of the pupil (sign of ``u − c`` × sign of
 ``v − c``) so that, besides the full set, the four half-pupils (top, bottom, left, right, each
@@ -82,13 +93,20 @@ class CostVolume:
     centre : index into ``views`` of the centre view (reference for ``"sad"``).
     max_disparity : the largest ``|δ|`` that will be asked for [view px per view step].
     resampling : ``"cubic"`` (default) or ``"linear"`` interpolation of the shifted views.
+    centre_weight : weight of the squared difference between a group's mean and the centre
+        view, added to the ``"variance"`` cost (>= 0; 0 for ``"sad"``; ``"anchored"`` is 1).
     """
 
     def __init__(self, views: torch.Tensor, au, av, centre: int, max_disparity: float,
                  cost: str = "variance", occlusion: bool = False,
-                 resampling: str = "cubic") -> None:
+                 resampling: str = "cubic", centre_weight: float = 0.0) -> None:
         if cost not in COSTS:
             raise ValueError(f"cost must be one of {COSTS}, got {cost!r}")
+        if not (isinstance(centre_weight, int | float) and 0 <= centre_weight < math.inf):
+            raise ValueError(f"centre_weight must be a number >= 0, got {centre_weight!r}")
+        if cost == "sad" and centre_weight:
+            raise ValueError("centre_weight applies to the variance cost, not to 'sad'")
+        self.centre_weight = 1.0 if cost == "anchored" else float(centre_weight)
         if resampling not in RESAMPLING:
             raise ValueError(f"resampling must be one of {RESAMPLING}, got {resampling!r}")
         self.resampling = resampling
@@ -185,9 +203,10 @@ class CostVolume:
         mean = (m @ s1.reshape(9, -1)).reshape(-1, h, w)
         if self.cost != "sad":
             cost = torch.clamp((m @ s2.reshape(9, -1)).reshape(-1, h, w) - mean * mean, min=0.0)
-            if self.cost == "anchored":  # mean squared difference to the centre view
+            if self.centre_weight > 0:  # squared distance of the mean to the centre view
                 p = self.pad
-                cost = cost + (mean - self.padded[self.centre, p:p + h, p:p + w]) ** 2
+                ref = self.padded[self.centre, p:p + h, p:p + w]
+                cost.add_((mean - ref).square_().mul_(self.centre_weight))
         else:
             cost = mean
         return cost[0] if cost.shape[0] == 1 else cost.amin(0)

@@ -5,8 +5,11 @@ Pipeline (the paper's Fig. 6 and Methods, "Depth estimation"):
 1. Views inside the pupil (``cfg.view_mask()``), each divided by its mean (vignetting and the
    coded aperture dim the outer views); optionally warped by the system aberration's per-view
    shift maps (``calibration``) so that only the parallax is left.
-2. Plane sweep: a cost volume over ``candidates`` disparities (variance of the aligned views, or
-   SAD to the centre view; optional half-pupil occlusion handling), each slice aggregated by a
+2. Plane sweep: a cost volume over ``candidates`` disparities (variance of the aligned views
+   resampled by cubic convolution, plus ``CENTRE_WEIGHT / scan²`` times the squared distance of
+   their mean to the centre view, which gives a pixel straddling an occluding edge the layer at
+   its centre; or SAD to the centre view; optional half-pupil occlusion handling,
+   ``metasensor.depth.cost``), each slice aggregated by a
    guided filter steered by the centre view (edge-aware cost-volume filtering, Hosni et al. 2013)
    and, by default, the per-pixel costs also regularised by semi-global matching
    (``metasensor.depth.sgm``, Hirschmüller 2008), which decides at depth edges and thin
@@ -58,6 +61,11 @@ MIN_CANDIDATES = 64  # the automatic candidate count, at least
 OUTER_STEP = 0.5  # automatic candidate spacing: the outermost view moves this many view px
 COARSE_SATURATED = 0.01  # the same for the coarse search
 AGREE_PX = 2.0  # window and semi-global estimates agree: outermost views within this [view px]
+# weight of the centre view in the variance cost (metasensor.depth.cost), divided by scan²: it
+# decides the pixels whose one-view-pixel footprint straddles an occluding edge (scan 1); where
+# the lenslet footprint spans `scan` view pixels (the meta-imaging sensor) it would only add
+# the centre view's noise
+CENTRE_WEIGHT = 0.25
 SATURATED = 0.001  # share of confident pixels on an end of the span that widens or warns
 
 
@@ -189,12 +197,13 @@ def _candidates(span, candidates: int | None, amax: float) -> np.ndarray:
     return geometry.disparity_candidates(span, candidates)
 
 
-def _sweep(stack, au, av, centre, cands, gf, cost, occlusion, penalties, progress):
+def _sweep(stack, au, av, centre, cands, gf, cost, occlusion, penalties, progress,
+           centre_weight: float = 0.0):
     """Plane sweep + winner-take-all: ``(disparity, winner index, confidence, saturation
     (low, high), sweep)``; without ``penalties`` from the window-aggregated costs (guided filter
     ``gf``), with them as :func:`_decide` says."""
     sweep = CostVolume(stack, au, av, centre, float(np.abs(cands).max()), cost=cost,
-                       occlusion=occlusion)
+                       occlusion=occlusion, centre_weight=centre_weight)
     # saturation is judged over the disparity change that moves the outermost view by a pixel
     amax = float(max(np.abs(au).max(), np.abs(av).max()))
     steps = int(min(len(cands) // 4, max(3, math.ceil(1.0 / (amax * (cands[1] - cands[0]))))))
@@ -266,10 +275,11 @@ def estimate_depth(views, cfg: SystemConfig, calibration=None, *, candidates: in
     candidates : number of plane-sweep disparities; None: the outermost view moves
         ``OUTER_STEP`` view px per candidate (at least ``MIN_CANDIDATES``).
     view_mask : boolean ``(nnum, nnum)`` of the views to use (default ``cfg.view_mask()``); it must
-        contain the centre view. ``cost``: ``"variance"`` or ``"sad"``; ``occlusion``: half-pupil
-        occlusion handling. ``radius`` [view px] and ``eps`` (relative to the guide's variance) of
-        the guided cost aggregation. ``refine_iterations``: Gauss–Newton steps (0 = parabola fit
-        only), aggregated over ``refine_radius`` (None: ``radius``). ``fill``: replace pixels
+        contain the centre view. ``cost``: ``"variance"`` (with the centre term of step 2) or
+        ``"sad"``; ``occlusion``: half-pupil occlusion handling. ``radius`` [view px] and
+        ``eps`` (relative to the guide's variance) of the guided cost aggregation.
+        ``refine_iterations``: Gauss–Newton steps (0 = parabola fit only), aggregated over
+        ``refine_radius`` (None: ``radius``). ``fill``: replace pixels
         with confidence below ``fill_threshold`` by an edge-aware, confidence-weighted average
         of the confident ones within ``fill_radius`` view px (None: 16, or the views' larger
         side where they are smaller) (``DepthResult.valid`` marks the others).
@@ -310,10 +320,11 @@ def estimate_depth(views, cfg: SystemConfig, calibration=None, *, candidates: in
                               "not found", RuntimeWarning, stacklevel=2)
         else:
             span, limit = given, None
+        weight = CENTRE_WEIGHT / cfg.scan**2 if cost == "variance" else 0.0
         while True:
             cands = _candidates(span, candidates, amax)
             disp, idx, conf, sat, sweep = _sweep(stack, au, av, centre, cands, gf, cost, occlusion,
-                                                 smoothing, progress)
+                                                 smoothing, progress, weight)
             # the (mean-subtracted, padded) copy inside the sweep serves for the views from here
             del stack
             stack = sweep.views
