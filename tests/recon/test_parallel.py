@@ -80,3 +80,25 @@ def test_local_blocks_run_in_completion_order():
     run_tasks(func, ["slow", "a", "b", "c"], on_result, num_workers=2)
     assert order[:3] == ["a", "b", "c"] and order[3] == "slow"
     assert time.perf_counter() - t0 < 4.0
+
+
+def test_local_workers_split_the_torch_threads_and_give_them_back():
+    # Local threads share the process's intra-op threads: two workers run one thread each
+    # while they run (no oversubscription), and the count is restored afterwards.
+    import torch
+
+    from metasensor.recon.parallel import run_tasks
+
+    before = torch.get_num_threads()
+    torch.set_num_threads(2)
+    try:
+        seen, out = [], []
+        run_tasks(lambda t: (seen.append(torch.get_num_threads()), t)[1], range(4), out.append,
+                  num_workers=2)
+        assert sorted(out) == [0, 1, 2, 3] and seen == [1, 1, 1, 1]
+        assert torch.get_num_threads() == 2
+        seen.clear()
+        run_tasks(lambda t: seen.append(torch.get_num_threads()), range(2), out.append)
+        assert seen == [2, 2]
+    finally:
+        torch.set_num_threads(before)

@@ -145,3 +145,30 @@ def test_model_error_bounds_the_data_weight(bank):
     rl = richardson_lucy(op, y, mask).estimate
     assert err(default) < err(rl) < 0.5
     assert err(noise_only) > 3.0
+
+
+def test_carried_normal_products_equal_direct_ones(bank):
+    # The x-step carries AᵀMA x along its CG iterations instead of recomputing it at the next
+    # call, and the residual history is formed from it: both must equal the direct products.
+    from metasensor.solvers.hqs import FoldedXStep, _residual_norm
+    from metasensor.solvers.priors import GRADIENT
+
+    g, op, _, _, y, sigma = _problem(bank, True)
+    mask = torch.zeros(g.grid, dtype=torch.bool)
+    mask[g.sample_slices()] = True
+    yn = y * mask / float(y.mean())
+    nm = op.normal()
+    data_normal = op.masked_normal(mask, nm)
+    step = FoldedXStep(nm, data_normal, mask, GRADIENT, 1e-4, 3)
+    aty = op.adjoint(yn)
+    solve = step.at(0.05 * step.scale)
+    x = solve(aty, None)
+    x = solve(aty * 1.1, x)  # a second call starts from the carried product
+    ax = step.data_product(x)
+    direct = data_normal(x)
+    assert ax is not None and float((ax - direct).norm() / direct.norm()) < 1e-4
+    assert step.data_product(x.clone()) is None  # only for the iterate it returned
+    mf = mask.to(torch.float32)
+    ref = float(torch.linalg.vector_norm((op.forward(x) - yn) * mf))
+    assert abs(_residual_norm(op, x, ax, aty, yn, mf) - ref) < 1e-3 * ref
+    assert _residual_norm(op, x, None, aty, yn, mf) == pytest.approx(ref, rel=1e-6)

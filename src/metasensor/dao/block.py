@@ -73,14 +73,27 @@ class DaoBlock:
         self.cache_bytes = int(cache_bytes)
         self.betas = Continuation().betas()
         self._up = None
+        self._otf = None
+        self._cached = False
+
+    @property
+    def otf(self) -> torch.Tensor | None:
+        """The Krishnan–Fergus half spectra of the current bank's kernels, all views (made on
+        first use: the ISA estimator never needs them); None where they exceed the cache."""
+        if self._otf is None and self._cached:
+            self._otf = psf2otf(self.kernels, self.shape)
+        return self._otf
 
     def _up_chunk(self, b: slice) -> torch.Tensor:
+        if self._up is None and self._cached:  # made on first use, kept while it fits
+            self._up = _upsample(self.views / self.scale, self.d)
         if self._up is not None:
             return self._up[b]
         return _upsample(self.views[b] / self.scale, self.d)
 
     def _otf_chunk(self, b: slice) -> torch.Tensor:
-        return self.otf[b] if self.otf is not None else psf2otf(self.kernels[b], self.shape)
+        otf = self.otf
+        return otf[b] if otf is not None else psf2otf(self.kernels[b], self.shape)
 
     def set_psfs(self, bank: np.ndarray) -> None:
         n = self.cfg.nnum
@@ -96,11 +109,10 @@ class DaoBlock:
         nv, grid = self.views.shape[0], self.shape[0] * self.shape[1]  # the KF deconvolutions
         cached = nv * (hh * ww * 4 + grid * 4) <= self.cache_bytes  # views + half spectra
         self.chunk = max(1, min(self.chunk0, self.cache_bytes // (12 * 4 * grid)))
-        if cached and self._up is None:
-            self._up = _upsample(self.views / self.scale, self.d)
-        elif not cached:
+        self._cached = cached
+        if not cached:
             self._up = None
-        self.otf = psf2otf(self.kernels, self.shape) if cached else None
+        self._otf = None  # this bank's spectra: on first use (:attr:`otf`)
         self._build_operator(h)
         self.sample_weight = self.reliability(self.inside_fraction())  # fixed with the PSFs
 

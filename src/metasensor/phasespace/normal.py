@@ -41,14 +41,19 @@ class FoldedNormal:
         d = g.d
         my, mx = g.grid
         ny, nx = g.domain
-        psf_t = op.psf
-        k, r = op.k, op.radius
+        nh = nx // 2 + 1
+        # the full spectra from the operator's half spectra (a real PSF's spectrum is Hermitian:
+        # H(ky, kx) = conj H(−ky, Nx − kx) for kx >= Nx//2 + 1), not from new FFTs
+        rows = torch.remainder(-torch.arange(ny, device=self.device), ny)
+        cols = nx - torch.arange(nh, nx, device=self.device)
         mat = torch.zeros((my, mx, d * d, d * d), dtype=torch.complex64, device=self.device)
         for i in range(0, op.n_views, op.chunk):
-            blk = psf_t[i:i + op.chunk]
-            pad = torch.zeros((blk.shape[0], ny, nx), device=self.device)
-            pad[:, :k, :k] = blk
-            h = self.fold(torch.fft.fft2(torch.roll(pad, (-r, -r), (-2, -1))))
+            half = op.otf[i:i + op.chunk]
+            full = torch.empty((half.shape[0], ny, nx), dtype=torch.complex64,
+                               device=self.device)
+            full[..., :nh] = half
+            full[..., nh:] = half[:, rows][..., cols].conj()
+            h = self.fold(full)
             mat += torch.einsum("vpqi,vpqj->pqij", h.conj(), h)
         self.matrix = mat / (d * d)
 
@@ -93,9 +98,12 @@ class FoldedNormal:
         if not lam > 0:
             raise ValueError(f"lam must be > 0, got {lam}")
         scale = float(self.matrix.diagonal(dim1=-2, dim2=-1).real.max())
-        w = torch.ones(self.matrix.shape[:-1], device=self.device) if weights is None else weights
         a = self.matrix.to(torch.complex128)
-        a = a + (lam * scale) * torch.diag_embed(w.to(torch.complex128))
+        diag = a.diagonal(dim1=-2, dim2=-1)
+        if weights is None:
+            diag += lam * scale
+        else:
+            diag += (lam * scale) * weights.to(torch.float64)
         chol, info = torch.linalg.cholesky_ex(a)
         del a
         if bool((info != 0).any()):

@@ -66,6 +66,9 @@ class ReconstructArgs:
         "unauthenticated TCP; use a private network or tls://)")] = None
     device: Annotated[str | None, typer.Option(
         help="cpu or cuda (default: cuda if present)")] = None
+    workers: Annotated[int, typer.Option(
+        "--workers", min=1, help="blocks reconstructed at once (threads sharing this process's "
+        "torch threads); each block in flight holds its own spectra and work arrays")] = 1
     zarr_out: Annotated[bool, typer.Option(
         "--zarr", help="also stitch into out/image.zarr block by block (large fields)")] = False
 
@@ -107,7 +110,8 @@ def _recon_options(args: ReconstructArgs, bank, target):
     return ReconOptions(overlap=args.overlap, iterations=args.iterations, subsets=args.subsets,
                         solver=args.solver, register=args.register_views,
                         view_radius=args.view_radius, device=args.device, psf=bank,
-                        scheduler=args.scheduler, out=target, progress=True)
+                        scheduler=args.scheduler, num_workers=args.workers, out=target,
+                        progress=True)
 
 
 def _zarr_target(args: ReconstructArgs, cfg, stack):

@@ -4,7 +4,9 @@
 another, for debugging), an address such as ``"tcp://10.0.0.1:8786"`` (connects a
 ``dask.distributed.Client``), or a ``Client`` / ``LocalCluster`` object. Results are handed to
 ``on_result`` as they arrive (in completion order), so the caller can write each block out and
-drop it: at most ``num_workers`` blocks (local) are in flight at once.
+drop it: at most ``num_workers`` blocks (local) are in flight at once. Local threads share the
+process's torch threads: with ``w`` workers each block runs on ``torch.get_num_threads() // w``
+of them (at least one) while they run, so the workers do not oversubscribe the cores.
 """
 
 from __future__ import annotations
@@ -28,15 +30,28 @@ def _client_for(scheduler):
 def _run_local(func, tasks: list, on_result, threads: bool, num_workers, progress) -> None:
     """In this process: one after another (``threads`` False), or on ``num_workers`` threads,
     each result handed on as soon as it is done (a slow block never idles the others)."""
+    workers = max(int(num_workers or 1), 1) if threads else 1
+    workers = min(workers, len(tasks))
+    if workers > 1:
+        import torch
+
+        total = torch.get_num_threads()
+        torch.set_num_threads(max(total // workers, 1))  # intra-op threads are process-wide
+        try:
+            _run_pool(func, tasks, on_result, workers, progress)
+        finally:
+            torch.set_num_threads(total)
+        return
+    for task in tasks:
+        on_result(func(task))
+        if progress is not None:
+            progress(1)
+
+
+def _run_pool(func, tasks: list, on_result, workers: int, progress) -> None:
+    """``workers`` threads, each result handed on as soon as it is done."""
     from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
 
-    workers = max(int(num_workers or 1), 1) if threads else 1
-    if workers == 1:
-        for task in tasks:
-            on_result(func(task))
-            if progress is not None:
-                progress(1)
-        return
     pending = iter(tasks)
     with ThreadPoolExecutor(max_workers=workers) as pool:
         running = {pool.submit(func, t) for _, t in zip(range(workers), pending, strict=False)}

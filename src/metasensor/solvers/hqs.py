@@ -141,26 +141,35 @@ def estimate_noise(data: torch.Tensor, mask: torch.Tensor) -> float:
     return float(sum(out) / len(out)) if out else 0.0
 
 
-def _pcg(normal, rhs, x, inv, nm: FoldedNormal, iterations: int) -> torch.Tensor:
-    """Conjugate gradients on ``normal(x) = rhs`` from ``x``, preconditioned by the circular,
-    fully observed system (``nm.solve`` with ``inv``)."""
-    r = rhs - normal(x)
+def _pcg(data_normal, reg, mu: float, rhs, x, ax, inv, nm: FoldedNormal, iterations: int
+         ) -> tuple[torch.Tensor, torch.Tensor]:
+    """Conjugate gradients on ``(AᵀMA + μ R) x = rhs`` from ``x``, preconditioned by the
+    circular, fully observed system (``nm.solve`` with ``inv``); ``R`` = ``reg``.
+
+    ``ax`` is ``AᵀMA x`` when known (None: computed here); it is carried along the iterations
+    (``AᵀMA`` of each step is one product the iteration makes anyway), so the result comes with
+    its own ``AᵀMA x`` and the next call starts without a product."""
+    if ax is None:
+        ax = data_normal(x)
+    r = rhs - ax - mu * reg(x)
     z = nm.solve(r, inv)
     p = z
     rz = float(torch.vdot(r.flatten(), z.flatten()))
     for _ in range(iterations):
-        q = normal(p)
+        qd = data_normal(p)
+        q = qd + mu * reg(p)
         pq = float(torch.vdot(p.flatten(), q.flatten()))
         if not pq > 0:
             break
         a = rz / pq
         x = x + a * p
+        ax = ax + a * qd
         r = r - a * q
         z = nm.solve(r, inv)
         rz_new = float(torch.vdot(r.flatten(), z.flatten()))
         p = z + (rz_new / rz) * p if rz > 0 else z
         rz = rz_new
-    return x
+    return x, ax
 
 
 class FoldedXStep:
@@ -180,23 +189,53 @@ class FoldedXStep:
         self.full = bool(mask.all()) and exact
         self.scale = float(normal.matrix.diagonal(dim1=-2, dim2=-1).real.max())
         sym = transform.symbol(normal.geometry.domain, normal.device) + self.floor
-        self.reg = normal.fold(sym.to(torch.complex64)).real
+        self.reg_fold = normal.fold(sym.to(torch.complex64)).real
+        self._last: tuple[torch.Tensor, torch.Tensor] | None = None
+
+    def reg(self, v: torch.Tensor) -> torch.Tensor:
+        """v -> (LᵀL + ε I) v."""
+        return self.transform.gram(v) + self.floor * v
 
     def system(self, mu: float) -> Callable[[torch.Tensor], torch.Tensor]:
         """v -> (AᵀMA + μ (LᵀL + ε I)) v."""
-        return lambda v: self.data_normal(v) + mu * (self.transform.gram(v) + self.floor * v)
+        return lambda v: self.data_normal(v) + mu * self.reg(v)
+
+    def data_product(self, x: torch.Tensor) -> torch.Tensor | None:
+        """``AᵀMA x`` for the tensor ``x`` this x-step returned last (masked solves), else
+        None."""
+        last = self._last
+        return last[1] if last is not None and last[0] is x else None
+
+    def carry(self, other: FoldedXStep) -> None:
+        """Take ``other``'s last iterate and its ``AᵀMA x`` (same data term) as this one's."""
+        self._last = other._last
 
     def at(self, mu: float):
-        inv = self.nm.factor(mu / self.scale, self.reg)
-        normal = self.system(mu)
+        inv = self.nm.factor(mu / self.scale, self.reg_fold)
 
         def solve(rhs: torch.Tensor, x: torch.Tensor | None) -> torch.Tensor:
             if self.full:
                 return self.nm.solve(rhs, inv)
+            ax = None if x is None else self.data_product(x)
             x0 = self.nm.solve(rhs, inv) if x is None else x
-            return _pcg(normal, rhs, x0, inv, self.nm, self.cg)
+            out, ax = _pcg(self.data_normal, self.reg, mu, rhs, x0, ax, inv, self.nm, self.cg)
+            self._last = (out, ax)
+            return out
 
         return solve
+
+
+def _residual_norm(op, x: torch.Tensor, ax: torch.Tensor | None, aty: torch.Tensor,
+                   yn: torch.Tensor, mf: torch.Tensor) -> float:
+    """``‖M (A x − yn)‖`` (``yn`` zero where unobserved, ``aty`` = ``Aᵀ yn``): from ``ax`` =
+    ``AᵀMA x`` when known, as ``sqrt(x·AᵀMAx − 2 x·Aᵀyn + ‖yn‖²)`` in double precision (no
+    product), else directly."""
+    if ax is None:
+        return float(torch.linalg.vector_norm((op.forward(x) - yn) * mf))
+    xd = x.flatten().double()
+    sq = (float(torch.dot(xd, ax.flatten().double())) - 2.0 * float(
+        torch.dot(xd, aty.flatten().double())) + float(torch.sum(yn.double() ** 2)))
+    return math.sqrt(max(sq, 0.0))
 
 
 def _data_weight(op: PhaseSpaceOperator, smooth: FoldedXStep, aty, y, m, unit: float,
@@ -209,7 +248,7 @@ def _data_weight(op: PhaseSpaceOperator, smooth: FoldedXStep, aty, y, m, unit: f
     sigma = estimate_noise(y, m) if options.noise is None else float(options.noise)
     fit = smooth.at(MISFIT_REG * smooth.scale)(aty, None)
     n_obs = max(float(mf.sum()) * yn.shape[0], 1.0)
-    misfit = float(torch.linalg.vector_norm((op.forward(fit) - yn) * mf)) / math.sqrt(n_obs)
+    misfit = _residual_norm(op, fit, smooth.data_product(fit), aty, yn, mf) / math.sqrt(n_obs)
     sigma_n = max(sigma / unit, misfit, 1e-6 * float(yn[:, m].abs().mean()))
     lam = options.lam_scale / sigma_n**2 * (op.geometry.d / REF_STEP) ** 2
     if not (lam > 0 and math.isfinite(lam)):
@@ -255,14 +294,15 @@ def hqs(op: PhaseSpaceOperator, y, mask, options: HQSOptions = HQSOptions(), *,
     smooth = FoldedXStep(nm, data_normal, m, GRADIENT, REG_FLOOR, INIT_CG, exact)
     aty = op.adjoint(yn)
     x = smooth.at(options.init_reg * smooth.scale)(aty, None)  # the smooth start
-    lam = _data_weight(op, smooth, aty, y, m, unit, options)
     xstep = FoldedXStep(nm, data_normal, m, options.prior.transform, REG_FLOOR, options.cg,
                         exact)
+    xstep.carry(smooth)  # the start's AᵀMA x: the first x-step needs no product for it
+    lam = _data_weight(op, smooth, aty, y, m, unit, options)
     norm_y = max(float(torch.linalg.vector_norm(yn)), 1e-30)
     history: list[float] = []
 
     def on_beta(xb: torch.Tensor) -> None:
-        history.append(float(torch.linalg.vector_norm((op.forward(xb) - yn) * mf)) / norm_y)
+        history.append(_residual_norm(op, xb, xstep.data_product(xb), aty, yn, mf) / norm_y)
         if progress is not None:
             progress(1)
 
