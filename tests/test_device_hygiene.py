@@ -99,3 +99,18 @@ def test_depth_places_its_tensors(cap, hostile):
         d = ms.estimate_depth(cap.views, cap.config, calibration=calibration, candidates=8,
                               device="cpu")
         assert np.isfinite(d.disparity).all() and d.disparity.dtype == np.float32
+
+
+def test_an_address_space_limit_keeps_the_default_device_on_the_cpu(monkeypatch):
+    # CUDA's start under `ulimit -v` ends the process (std::bad_alloc), so the default device
+    # there is the CPU, said once; without a limit the default is CUDA where it is present
+    import metasensor.backend as backend
+
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: True)
+    monkeypatch.setattr(backend, "_CPU_UNDER_LIMIT_WARNED", False)
+    monkeypatch.setattr(backend, "address_space_limit", lambda: 3 * 2**30)
+    with pytest.warns(RuntimeWarning, match="address-space limit"):
+        assert backend.resolve_device(None).type == "cpu"
+    assert backend.resolve_device(None).type == "cpu"  # the warning is not repeated
+    monkeypatch.setattr(backend, "address_space_limit", lambda: None)
+    assert backend.resolve_device(None).type == "cuda"

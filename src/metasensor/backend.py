@@ -2,16 +2,55 @@
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import torch
 
-__all__ = ["resolve_device", "as_tensor", "to_numpy", "check_memory"]
+__all__ = ["resolve_device", "address_space_limit", "as_tensor", "to_numpy", "check_memory"]
+
+
+def address_space_limit() -> int | None:
+    """The process's address-space limit in bytes (``ulimit -v``, ``RLIMIT_AS``), None if none."""
+    try:
+        import resource
+    except ImportError:  # not a POSIX system
+        return None
+    soft, _ = resource.getrlimit(resource.RLIMIT_AS)
+    return None if soft == resource.RLIM_INFINITY else int(soft)
+
+
+_CPU_UNDER_LIMIT_WARNED = False
 
 
 def resolve_device(device: str | torch.device | None = None) -> torch.device:
-    """``None`` → CUDA when present, else CPU; a string or device is checked and returned."""
+    """The torch device to compute on.
+
+    Parameters
+    ----------
+    device : str, torch.device or None
+        ``None``: CUDA when present, else the CPU. CUDA's runtime reserves far more virtual
+        address space than it allocates, and under an address-space limit (``ulimit -v``) its
+        start ends the process (``std::bad_alloc``) instead of raising; so ``None`` under such a
+        limit is the CPU, with one warning. A string or device is checked and returned.
+
+    Returns
+    -------
+    torch.device
+    """
+    global _CPU_UNDER_LIMIT_WARNED
     if device is None:
-        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+        if not torch.cuda.is_available():
+            return torch.device("cpu")
+        limit = address_space_limit()
+        if limit is not None:
+            if not _CPU_UNDER_LIMIT_WARNED:
+                _CPU_UNDER_LIMIT_WARNED = True
+                warnings.warn(f"an address-space limit ({limit / 2**30:.1f} GiB, ulimit -v) is "
+                              "set: CUDA cannot start under one, computing on the CPU",
+                              RuntimeWarning, stacklevel=2)
+            return torch.device("cpu")
+        return torch.device("cuda")
     try:
         dev = torch.device(device)
     except (RuntimeError, TypeError) as exc:

@@ -22,7 +22,7 @@ def _problem(window=(20, 26), d=3, k=9, views=5, seed=0):
 
 
 def _direct(op, mask, v):
-    return op.adjoint(op.forward(v) * mask.to(torch.float32))
+    return op.adjoint(op.forward(v) * mask.to(op.device, torch.float32))
 
 
 @pytest.mark.parametrize("window,d,k", [((20, 26), 3, 9), ((11, 9), 5, 13), ((30, 7), 3, 15)])

@@ -91,6 +91,7 @@ class BandNormal:
         if normal.op is not op:
             raise ValueError("normal must be the folded normal operator of op")
         psf_t = op.psf
+        self.device = op.device
         my, mx = op.geometry.grid
         y0, y1, x0, x1 = rectangle
         self.normal = normal
@@ -106,6 +107,7 @@ class BandNormal:
         self.fraction = sum(b.area for b in self.bands) / float(ny * nx)
 
     def __call__(self, v: torch.Tensor) -> torch.Tensor:
+        v = torch.as_tensor(v, dtype=torch.float32, device=self.device)
         out = self.normal.apply(v)
         for band in self.bands:
             band.apply(v, out, alpha=-1.0)
@@ -117,7 +119,7 @@ def masked_normal(op: PhaseSpaceOperator, normal: FoldedNormal, mask: torch.Tens
     """A callable v -> AᵀMA v (``mask`` (My, Mx) bool, True where observed): the
     :class:`BandNormal` where the mask is one rectangle and its bands cover at most
     ``max_fraction`` of the domain, else the direct ``op.adjoint(op.forward(v) * mask)``."""
-    m = mask.to(torch.bool)
+    m = mask.to(device=op.device, dtype=torch.bool)
     mf = m.to(torch.float32)
 
     def direct(v: torch.Tensor) -> torch.Tensor:
