@@ -21,6 +21,7 @@ def address_space_limit() -> int | None:
 
 
 _CPU_UNDER_LIMIT_WARNED = False
+CUDA_ADDRESS_SPACE = 64 * 2**30  # bytes of address space CUDA's start is given (docs/decisions.md)
 
 
 def resolve_device(device: str | torch.device | None = None) -> torch.device:
@@ -30,9 +31,9 @@ def resolve_device(device: str | torch.device | None = None) -> torch.device:
     ----------
     device : str, torch.device or None
         ``None``: CUDA when present, else the CPU. CUDA's runtime reserves far more virtual
-        address space than it allocates, and under an address-space limit (``ulimit -v``) its
-        start ends the process (``std::bad_alloc``) instead of raising; so ``None`` under such a
-        limit is the CPU, with one warning. A string or device is checked and returned.
+        address space than it allocates and fails to start under a tighter address-space limit
+        (``ulimit -v``) than :data:`CUDA_ADDRESS_SPACE` bytes; ``None`` under such a limit is the
+        CPU, with one warning. A string or device is checked and returned.
 
     Returns
     -------
@@ -43,11 +44,11 @@ def resolve_device(device: str | torch.device | None = None) -> torch.device:
         if not torch.cuda.is_available():
             return torch.device("cpu")
         limit = address_space_limit()
-        if limit is not None:
+        if limit is not None and limit < CUDA_ADDRESS_SPACE:
             if not _CPU_UNDER_LIMIT_WARNED:
                 _CPU_UNDER_LIMIT_WARNED = True
                 warnings.warn(f"an address-space limit ({limit / 2**30:.1f} GiB, ulimit -v) is "
-                              "set: CUDA cannot start under one, computing on the CPU",
+                              "set: CUDA does not start under it, computing on the CPU",
                               RuntimeWarning, stacklevel=2)
             return torch.device("cpu")
         return torch.device("cuda")

@@ -20,7 +20,21 @@ import metasensor as ms
 from metasensor.io.views import write_views
 
 CFG = ms.SystemConfig(nnum=3, mla_pitch=3 * 4.6e-6, mla_focal=3 * 46e-6, scan=3)
-CAP_BYTES = 3 * 2**30  # the interpreter with torch imported maps about 0.7 GB
+
+
+def _cap_bytes() -> int:
+    """The address-space cap of the commands' process: 2.3 GiB over what the interpreter maps
+    once torch and the package are imported (about 0.7 GB with a CPU build of torch; a CUDA
+    build maps several GB of libraries, and under 3 GiB it cannot even be imported)."""
+    probe = ("import re, torch, metasensor.cli; "
+             "print(re.search(r'VmPeak:\\s+(\\d+) kB', open('/proc/self/status').read())[1])")
+    src = str(Path(__file__).resolve().parents[2] / "src")
+    out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True,
+                         timeout=120, env={"PYTHONPATH": src, "PATH": "", "OMP_NUM_THREADS": "1"})
+    assert out.returncode == 0, out.stderr[-2000:]
+    return int(out.stdout.split()[-1]) * 1024 + int(2.3 * 2**30)
+
+
 SCRIPT = capped_cli_script(
     "import resource; resource.setrlimit(resource.RLIMIT_AS, (int(sys.argv[2]),) * 2)")
 
@@ -72,7 +86,7 @@ def test_huge_or_endless_requests_end_at_once_naming_the_value(tmp_path):
                        "--out", str(p)], name))
     src = str(Path(__file__).resolve().parents[2] / "src")
     run = subprocess.run([sys.executable, "-c", SCRIPT, json.dumps([c for c, _ in cases]),
-                          str(CAP_BYTES)], capture_output=True, text=True, timeout=300,
+                          str(_cap_bytes())], capture_output=True, text=True, timeout=300,
                          env={"PYTHONPATH": src, "PATH": "", "OMP_NUM_THREADS": "1",
                               "METASENSOR_CACHE": str(tmp_path / "cache")})
     assert run.returncode == 0, run.stderr[-2000:]
