@@ -20,14 +20,22 @@ Rows:
   simulated with key frames every 1 (a bank per frame), 6 and 12 frames on the pixel grid, and
   with the screen held at the period's first frame; each one's relative r.m.s. difference of
   the clean views from the bank-per-frame simulation (the scene: the Moon, ``size`` px).
+- ``telescope-truth``: the telescope's turbulence against Kolmogorov theory (Noll 1976), over
+  12 seeded sequences (``--quick``: 4) at the demo's D/r0, three frames each (first, middle,
+  last of a scan period): a frame's wavefront r.m.s. over the pupil (piston removed), its tip
+  and tilt, its Noll 4-45; the Noll 4-45 r.m.s. of the period's mean wavefront (what one DAO
+  estimate per window can find); and the largest true motion of any view between the
+  period's frames (view px, :func:`metasensor.scenarios.truth.view_motion`).
 
-``python benchmarks/bench_scenarios.py --telescope [--quick]`` runs the two telescope rows alone
-and puts them into the results JSON in place of the old ones (the other rows kept).
+``python benchmarks/bench_scenarios.py --telescope [--quick]`` runs the three telescope rows alone
+(``--gigapixel``: the gigapixel demo, ``stitch`` and ``stitch-cluster`` rows) and puts them into
+the results JSON in place of the old ones (the other rows kept).
 """
 
 from __future__ import annotations
 
 import json
+import math
 import os
 import resource
 import subprocess
@@ -169,24 +177,36 @@ def _scenario_rows(quick: bool, names=("plastic-wrap", "telescope", "gigapixel")
     rows = []
     for name in names:
         with tempfile.TemporaryDirectory() as tmp:
-            s = run_scenario(name, tmp, progress=False, **small.get(name, {}))
-        row = {"case": name, "seconds": s["seconds"], "cpu_seconds": s["cpu_seconds"]}
-        if name == "plastic-wrap":
-            row.update({k: v for k, v in s["gains"].items() if not isinstance(v, dict)})
-            row["bar_px"] = {r["sensor"]: r.get("bar_px") for r in s["table"]}
-        elif name == "telescope":
-            row.update({"pupil_error": s["pupil"]["error"],
-                        "residual_max_waves": s["residual_max_waves"],
-                        "dao_gain_db": s["dao_gain_db"], "dao_over_2d_db": s["dao_over_2d_db"],
-                        "kymo_lattice_ratio": s["kymograph"]["lattice_corrected_over_static"],
-                        "psnr_db": {r["sensor"]: r["psnr_db"] for r in s["table"]},
-                        "stage_seconds": s["stage_seconds"]})
-        else:
-            row.update({"registration_error_px": s["registration_error_px"],
-                        "seam_ratio": s["table"][1]["seam_ratio"],
-                        "truth_seam_ratio": s["table"][1]["truth_seam_ratio"]})
-        rows.append(row)
+            rows.append(summary_row(run_scenario(name, tmp, progress=False,
+                                                 **small.get(name, {}))))
     return rows
+
+
+def summary_row(s: dict) -> dict:
+    """A scenario's row from its summary (``summary.json`` of ``metasensor demo --scenario``)."""
+    name = s["scenario"]
+    row = {"case": name, "seconds": s["seconds"], "cpu_seconds": s["cpu_seconds"]}
+    if name == "plastic-wrap":
+        row.update({k: v for k, v in s["gains"].items() if not isinstance(v, dict)})
+        row["bar_px"] = {r["sensor"]: r.get("bar_px") for r in s["table"]}
+    elif name == "telescope":
+        row.update({"pupil_error": s["pupil"]["error"],
+                    "residual_max_waves": s["residual_max_waves"],
+                    "residual_over_true_max": float(np.max(s["residual_over_true"])),
+                    "true_rms_waves": s["true_rms_waves"],
+                    "true_frame_rms_waves": s["true_frame_rms_waves"],
+                    "dao_gain_db": s["dao_gain_db"], "dao_over_2d_db": s["dao_over_2d_db"],
+                    "kymo_lattice_ratio": s["kymograph"]["lattice_corrected_over_static"],
+                    "motion": s.get("motion"),
+                    "psnr_db": {r["sensor"]: r["psnr_db"] for r in s["table"]},
+                    "stage_seconds": s["stage_seconds"]})
+    else:
+        row.update({"registration_error_px": s["registration_error_px"],
+                    "psnr_db": {r["sensor"]: r["psnr_db"] for r in s["table"]},
+                    "seam_ratio": {r["sensor"]: r["seam_ratio"] for r in s["table"]},
+                    "truth_seam_ratio": s["table"][1]["truth_seam_ratio"],
+                    "space_variant": s["settings"].get("space_variant")})
+    return row
 
 
 def _sim_views(scene, cfg, turb, fz, blocks) -> tuple[np.ndarray, float]:
@@ -263,11 +283,51 @@ def telescope_simulation(quick: bool = False) -> dict:
             "demo_key_every": st.key_every, "demo_subsample": st.sim_subsample}
 
 
+def telescope_truth(quick: bool = False) -> dict:
+    """The ``telescope-truth`` row (module docstring)."""
+    import metasensor as ms
+    from metasensor.scenarios.screens import LayeredTurbulence, fit_screen
+    from metasensor.scenarios.telescope import TelescopeSettings
+    from metasensor.scenarios.truth import kolmogorov_mode_rms, kolmogorov_residual, view_motion
+
+    st = TelescopeSettings()
+    cfg = ms.SystemConfig(obstruction=st.obstruction)
+    n = cfg.scan**2
+    s = 64
+    k = -1.0 + (np.arange(s) + 0.5) * 2.0 / s
+    x, y = np.meshgrid(k, k, indexing="xy")
+    disk = x**2 + y**2 <= 1.0
+    total, tilt, high, window, motion = [], [], [], [], []
+    for seed in range(4 if quick else 12):
+        turb = LayeredTurbulence(d_over_r0=st.d_over_r0, samples=s, seed=seed, span=n)
+        scr = turb.screens(n).astype(np.float64)
+        for t in (0, n // 2, n - 1):
+            w = scr[t][disk]
+            total.append(((w - w.mean()) ** 2).mean())
+            z = fit_screen(scr[t], 45, modes=range(2, 46))
+            tilt.append((z[1:3] ** 2).sum())
+            high.append((z[3:45] ** 2).sum())
+        window.append((turb.mean_zernike(n)[3:45] ** 2).sum())
+        m = view_motion(scr, cfg, n // 2)
+        motion.append(float(np.nanmax(np.hypot(m[..., 0], m[..., 1]))))
+    d = st.d_over_r0
+    return {"case": "telescope-truth", "d_over_r0": d, "screens": len(window),
+            "frame_rms_waves": float(np.sqrt(np.mean(total))),
+            "frame_rms_theory": math.sqrt(kolmogorov_residual(1) * d ** (5 / 3)) / (2 * math.pi),
+            "tilt_rms_waves": float(np.sqrt(np.mean(tilt))),
+            "tilt_rms_theory": kolmogorov_mode_rms(d, 2, 3),
+            "noll4_45_rms_waves": float(np.sqrt(np.mean(high))),
+            "noll4_45_rms_theory": kolmogorov_mode_rms(d, 4, 45),
+            "window_mean_noll4_45_rms_waves": float(np.sqrt(np.mean(window))),
+            "view_motion_max_px": {"median": float(np.median(motion)),
+                                   "max": float(np.max(motion))}}
+
+
 def telescope_rows(quick: bool = False, save: bool = False) -> list[dict]:
     """The simulation's row and the telescope demo's (:func:`_scenario_rows` for it alone);
     ``save``: each put into the results JSON as soon as it is measured (:func:`merge_rows`)."""
     rows = []
-    for make in (lambda: [telescope_simulation(quick)],
+    for make in (lambda: [telescope_truth(quick)], lambda: [telescope_simulation(quick)],
                  lambda: _scenario_rows(quick, names=("telescope",))):
         rows += make()
         if save:
@@ -289,26 +349,45 @@ def merge_rows(rows: list[dict], quick: bool = False) -> Path:
     return path
 
 
-def run(quick: bool = False) -> list[dict]:
+def stitch_row(quick: bool = False) -> dict:
+    """The ``stitch`` row (module docstring): the stitcher in a child process."""
     import shutil
 
-    rows = _scenario_rows(quick)
     shape = (1000, 1200) if quick else (6000, 8000)
     st = _child_stitch(shape, (2, 2), 64 if quick else 256, 512 if quick else 2048)
     shutil.rmtree(st.pop("folder"), ignore_errors=True)
     st.pop("out")
     cores = os.cpu_count() or 1
     st.update({"case": "stitch", "gigapixel_s": st["s_per_mp"] * 1000,
-               "s_per_mp_per_worker": st["s_per_mp"] * cores, "cores": cores})
-    rows.append(st)
+               "s_per_mp_per_worker": st["s_per_mp"] * cores, "cores": cores,
+               "gigapixel_s_per_worker": st["s_per_mp"] * cores * 1000})
+    return st
+
+
+def gigapixel_rows(quick: bool = False, save: bool = False) -> list[dict]:
+    """The gigapixel demo's row, the ``stitch`` row and the ``stitch-cluster`` row; ``save``:
+    each put into the results JSON as soon as it is measured (:func:`merge_rows`)."""
+    rows = []
+    for make in (lambda: _scenario_rows(quick, names=("gigapixel",)),
+                 lambda: [stitch_row(quick)], lambda: [_cluster_row()]):
+        rows += make()
+        if save:
+            merge_rows(rows[-1:], quick)
+    return rows
+
+
+def run(quick: bool = False) -> list[dict]:
+    rows = _scenario_rows(quick)
+    rows.append(stitch_row(quick))
     rows.append(_cluster_row())
     return rows
 
 
 if __name__ == "__main__":
-    if "--telescope" in sys.argv:
+    if "--telescope" in sys.argv or "--gigapixel" in sys.argv:
         sys.path.insert(0, str(HERE))
         quick = "--quick" in sys.argv
-        print(json.dumps(telescope_rows(quick, save=True), indent=1))
+        rows = telescope_rows if "--telescope" in sys.argv else gigapixel_rows
+        print(json.dumps(rows(quick, save=True), indent=1))
     else:
         print(json.dumps(run(quick="--quick" in sys.argv), indent=1))

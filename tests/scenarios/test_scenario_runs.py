@@ -92,3 +92,11 @@ def test_telescope_settings_are_validated():
     with pytest.raises(ValueError, match="check_iterations"):
         TelescopeSettings(check_iterations=0)
     assert TelescopeSettings(check_iterations=None).check_iterations is None
+
+
+def test_gigapixel_settings_default_to_the_space_variant_model():
+    from metasensor.scenarios.gigapixel import GigapixelSettings
+
+    assert GigapixelSettings().space_variant is True
+    with pytest.raises(TypeError, match="space_variant"):
+        GigapixelSettings(space_variant=1)
