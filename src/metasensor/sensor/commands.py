@@ -143,16 +143,9 @@ def realign_cmd(
     from tqdm import tqdm
 
     from metasensor.io.raw import open_raw
-    from metasensor.io.views import write_views
     from metasensor.sensor.realign import realign_sequence
-    from metasensor.sensor.rectify import check_fits, rectify_frames
 
-    if dtype not in ("float32", "input"):
-        raise ValueError(f"--dtype must be float32 or input, got {dtype!r}")
-    if offsets not in ("measure", "calib", "nominal"):
-        raise ValueError(f"--offsets must be measure, calib or nominal, got {offsets!r}")
-    if out.suffix.lower() not in (".tif", ".tiff", ".zarr"):
-        raise ValueError(f"--out must end in .tif, .tiff or .zarr: {out}")
+    _check_realign_options(dtype, offsets, out)
     from metasensor.io.guard import guard
 
     guard([raw_path, config, calib_path], [out], lock=False)
@@ -176,49 +169,77 @@ def realign_cmd(
             _check_period(raw, cfg, config, raw_path)
         stream = bars.enter_context(tqdm(raw, total=n_frames, desc="realign", unit="frame"))
         if calib is not None:
-            from metasensor.sensor.reuse import adapt
-
-            check_fits(calib, raw.shape[1:], cfg.nnum)
-            calib = adapt(calib, cfg.scan, phases, moving)
-            off = offsets if offsets != "calib" else None
-            if offsets == "measure" and moving == "mla":
-                from metasensor.sensor.reuse import frame_offset
-
-                def off(f, frame, phase):
-                    return frame_offset(frame, calib, phase, index=f)
-            elif offsets == "measure":
-                off = "nominal"
-            stream = rectify_frames(stream, calib, phases, offsets=off,
-                                    start_phase=start_phase, method=method)
-            if dtype == "input" and raw.dtype.kind in "ui":
-                stream = _round_to(stream, raw.dtype)
-        flat = None
-        if apply_flat:
-            flat = _flat(calib, calib_path, cfg)
-        n_out = n_frames - tp + 1 if sliding else n_frames // tp
+            calib, stream = _rectified(stream, raw, calib, cfg, phases, moving, offsets,
+                                       start_phase, method, dtype)
+        flat = _flat(calib, calib_path, cfg) if apply_flat else None
         # where the views' grid starts on the raw frames: sensor (row, col) of the first pixel
         # of view lenslet (0, 0) at phase (0, 0) (the calibration's kept grid, else pixel 0)
         origin = [0.0, 0.0] if calib is None else [round(v, 4) for v in calib.origin]
         meta = {"scan_order": [list(p) for p in phases], "moving": moving,
                 "source": str(raw_path), "sliding": sliding, "origin": origin}
-        written = []
-        for k, views in enumerate(realign_sequence(stream, cfg, phases, moving,
-                                                   sliding=sliding, start_phase=start_phase)):
-            if flat is not None:
-                views = np.where(flat > 0.05, views / np.maximum(flat, 0.05), 0).astype(
-                    np.float32)
-            elif dtype == "float32" and views.dtype != np.float32:
-                views = views.astype(np.float32)  # exact for raw data up to 24 bits
-            path = names[k]
-            # the phases in the order this stack's frames were taken (what motion correction
-            # needs): window k starts at frame k (sliding) or k·T, i.e. at phase index
-            # (start + k) % T or start % T of the scan order
-            s = (start_phase + (k if sliding else 0)) % tp
-            taken = [list(q) for q in phases[s:] + phases[:s]]
-            write_views(path, views, cfg, extra={**meta, "window": k, "scan_order": taken})
-            written.append(path)
+        written = _write_stacks(realign_sequence(stream, cfg, phases, moving, sliding=sliding,
+                                                 start_phase=start_phase),
+                                names, cfg, meta, flat, dtype, start_phase)
     typer.echo(f"-> {written[0]}" + (f" ... {written[-1]} ({len(written)} stacks)"
                                      if len(written) > 1 else ""))
+
+
+def _write_stacks(stacks, names, cfg, meta, flat, dtype, start_phase):
+    """Write each realigned view stack to its name (flat-fielded, or float32 for
+    ``dtype="float32"``), with the phases in the order its frames were taken; the paths."""
+    from metasensor.io.views import write_views
+
+    phases = [tuple(p) for p in meta["scan_order"]]
+    tp = len(phases)
+    written = []
+    for k, views in enumerate(stacks):
+        if flat is not None:
+            views = np.where(flat > 0.05, views / np.maximum(flat, 0.05), 0).astype(np.float32)
+        elif dtype == "float32" and views.dtype != np.float32:
+            views = views.astype(np.float32)  # exact for raw data up to 24 bits
+        # the phases in the order this stack's frames were taken (what motion correction
+        # needs): window k starts at frame k (sliding) or k·T, i.e. at phase index
+        # (start + k) % T or start % T of the scan order
+        s = (start_phase + (k if meta["sliding"] else 0)) % tp
+        taken = [list(q) for q in phases[s:] + phases[:s]]
+        write_views(names[k], views, cfg, extra={**meta, "window": k, "scan_order": taken})
+        written.append(names[k])
+    return written
+
+
+def _check_realign_options(dtype: str, offsets: str, out: Path) -> None:
+    """One-line errors for ``realign``'s choice options and output suffix."""
+    if dtype not in ("float32", "input"):
+        raise ValueError(f"--dtype must be float32 or input, got {dtype!r}")
+    if offsets not in ("measure", "calib", "nominal"):
+        raise ValueError(f"--offsets must be measure, calib or nominal, got {offsets!r}")
+    if out.suffix.lower() not in (".tif", ".tiff", ".zarr"):
+        raise ValueError(f"--out must end in .tif, .tiff or .zarr: {out}")
+
+
+def _rectified(stream, raw, calib, cfg, phases, moving, offsets, start_phase, method, dtype):
+    """(calibration adapted to the scan, the frames rectified one by one) for ``realign``:
+    each frame on its own measured grid offset (``offsets="measure"``, a moving MLA), the
+    stored ones (``"calib"``) or the nominal ones; rounded back to the raw integer type for
+    ``dtype="input"``."""
+    from metasensor.sensor.rectify import check_fits, rectify_frames
+    from metasensor.sensor.reuse import adapt
+
+    check_fits(calib, raw.shape[1:], cfg.nnum)
+    calib = adapt(calib, cfg.scan, phases, moving)
+    off = offsets if offsets != "calib" else None
+    if offsets == "measure" and moving == "mla":
+        from metasensor.sensor.reuse import frame_offset
+
+        def off(f, frame, phase):
+            return frame_offset(frame, calib, phase, index=f)
+    elif offsets == "measure":
+        off = "nominal"
+    stream = rectify_frames(stream, calib, phases, offsets=off, start_phase=start_phase,
+                            method=method)
+    if dtype == "input" and raw.dtype.kind in "ui":
+        stream = _round_to(stream, raw.dtype)
+    return calib, stream
 
 
 def _stored_settings(raw_path: Path, config, scan, order, moving):
