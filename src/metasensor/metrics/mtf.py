@@ -260,6 +260,30 @@ def measure_edge(image, roi=None, *, oversample: int = 4, window: str = "hamming
     pixel_pitch: metres, gives line pairs per mm; fmax: highest frequency returned (cycles/pixel,
     at most ``oversample / 2``). Raises ValueError (one line) for bad input or no usable edge.
     """
+    a, roi = _edge_roi(image, roi, oversample, window, pixel_pitch, fmax)
+
+    gy, gx = np.gradient(a)
+    vertical = abs(gx.mean()) >= abs(gy.mean())
+    if not vertical:
+        a = a.T
+    contrast, noise = _edge_contrast(a)
+    if abs(contrast) <= max(5.0 * noise, 1e-9 * (np.abs(a).max() + 1e-300)):
+        raise ValueError(f"no edge found in roi {roi}: contrast {abs(contrast):.3g} is not above "
+                         f"the noise {noise:.3g}")
+
+    c0, c1 = _fit_edge(a)
+    _check_straight_edge(a, c0, c1, roi)
+    esf, angle = _binned_esf(a, c0, c1, oversample, roi)
+    lsf_w, freq, mtf = _edge_spectrum(esf, oversample, window, tail_smoothing, correct_binning,
+                                      roi)
+    keep = freq <= fmax + 1e-12
+    return EdgeMTF(freq=freq[keep], mtf=mtf[keep], orientation="vertical" if vertical else
+                   "horizontal", angle_deg=angle, roi=roi, oversample=int(oversample),
+                   pixel_pitch=pixel_pitch, esf=esf, lsf=lsf_w, contrast=abs(contrast))
+
+
+def _edge_roi(image, roi, oversample, window, pixel_pitch, fmax):
+    """The checked arguments of :func:`measure_edge`: (a float64 copy of the ROI, the ROI)."""
     arr = np.asarray(image)
     if arr.ndim != 2:
         raise ValueError(f"image must be 2-D (H, W), got shape {arr.shape}")
@@ -280,18 +304,13 @@ def measure_edge(image, roi=None, *, oversample: int = 4, window: str = "hamming
         raise ValueError(f"roi {roi} is too small for an edge measurement (need >= 8x8 pixels)")
     if not np.all(np.isfinite(a)):
         raise ValueError(f"image contains NaN or infinite values in roi {roi}")
+    return a, roi
 
-    gy, gx = np.gradient(a)
-    vertical = abs(gx.mean()) >= abs(gy.mean())
-    if not vertical:
-        a = a.T
-    contrast, noise = _edge_contrast(a)
-    if abs(contrast) <= max(5.0 * noise, 1e-9 * (np.abs(a).max() + 1e-300)):
-        raise ValueError(f"no edge found in roi {roi}: contrast {abs(contrast):.3g} is not above "
-                         f"the noise {noise:.3g}")
 
-    c0, c1 = _fit_edge(a)
-    _check_straight_edge(a, c0, c1, roi)
+def _binned_esf(a, c0, c1, oversample, roi):
+    """(edge-spread function binned at ``1 / oversample`` px along the edge normal, the edge's
+    tilt in degrees) of the ROI ``a`` whose edge is ``x = c0 + c1 y``, over a whole number of
+    phase cycles of the slant (sfrmat3)."""
     ny, nx = a.shape
     angle = math.degrees(math.atan(c1))
     # whole number of phase cycles of the slant (sfrmat3), centred in the ROI
@@ -335,6 +354,13 @@ def measure_edge(image, roi=None, *, oversample: int = 4, window: str = "hamming
     centres = np.arange(nb) + 0.5
     esf = np.interp(centres, mean_pos, sums[filled] / counts[filled])
 
+    return esf, angle
+
+
+def _edge_spectrum(esf, oversample, window, tail_smoothing, correct_binning, roi):
+    """(windowed line-spread function, frequencies in cycles/px, MTF) of a binned ESF: the
+    derivative and the bin average divided out, the noise-only tails cut and smoothed."""
+    delta = 1.0 / oversample
     lsf = np.diff(esf)
     lsf = lsf * np.sign(lsf.sum())
     mid, width = _lsf_centre_width(esf * np.sign(esf[-1] - esf[0]), oversample)
@@ -357,10 +383,7 @@ def measure_edge(image, roi=None, *, oversample: int = 4, window: str = "hamming
     if correct_binning:
         corr = corr * np.sinc(freq * delta)  # box average over the bin width
     mtf = mtf / corr
-    keep = freq <= fmax + 1e-12
-    return EdgeMTF(freq=freq[keep], mtf=mtf[keep], orientation="vertical" if vertical else
-                   "horizontal", angle_deg=angle, roi=roi, oversample=int(oversample),
-                   pixel_pitch=pixel_pitch, esf=esf, lsf=lsf_w, contrast=abs(contrast))
+    return lsf_w, freq, mtf
 
 
 def slanted_edge_mtf(image, roi=None, *, oversample: int = 4, window: str = "hamming",
