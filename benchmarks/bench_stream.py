@@ -11,16 +11,15 @@ scan), and the noise-free views of its middle tile (105 samples a side, consiste
 periodic scene because the PSFs reach far less than a tile) are tiled over the field, plus fresh
 Gaussian noise with the signal-dependent variance a·signal + b fitted to that capture's 30 dB
 photon and read noise (seeded per view), so the store compresses like a real one.
-A child process runs the command and reports its own peak resident memory, once per solver:
-Richardson-Lucy, 5 iterations (issue 5's benchmark setting), then the default sparse-gradient
-solver (HQS, ~8x RL's time at 2,010 px: ``bench_isa``). Rows: views bytes
-(logical and on disk), peak RSS and its ratio to the views, wall time, seconds per megapixel,
-and the SSIM of a 4 x 4-tile crop in the middle against the tiled truth, next to the middle tile of
-the 3 x 3-tile capture reconstructed in one piece (with the same solver).
-
-Measured (2 cores, ``results/stream.json``): Richardson–Lucy 299 s (6.3 s/MP), 2.0 GB peak
-(0.43x the views), crop SSIM 0.699 (one piece 0.701); HQS 1,982 s (42 s/MP), 2.6 GB (0.55x),
-crop SSIM 0.830 (one piece 0.829).
+A child process runs the command and reports its own peak resident memory and CPU time, once
+per mode: the command's default (no options: the sparse-gradient solver, HQS, after
+``--dao auto``'s per-block aberration probe), then ``--quality fast`` (the preview:
+Richardson-Lucy, 5 iterations, issue 5's benchmark setting, no aberration estimate). Rows: views
+bytes (logical and on disk), peak RSS and its ratio to the views, wall and CPU time, seconds per
+megapixel, the 1-minute load average before and after, and the SSIM of a 4 x 4-tile crop in the
+middle against the tiled truth, next to the middle tile of the 3 x 3-tile capture reconstructed
+in one piece (with the same settings). A full run writes ``results/stream.json`` after each row
+(``"partial": true`` until the last). Measured figures: ``docs/decisions.md``.
 """
 
 from __future__ import annotations
@@ -42,7 +41,8 @@ FULL = {"sensor": (6004, 7920), "blocks": "8x8"}
 QUICK = {"sensor": (1204, 1204), "blocks": "2x2"}
 TILE_PX = 315  # 21 lenslets
 ITERATIONS = 5
-SOLVERS = ("rl", "hqs")  # issue 5's benchmark setting, then the default solver
+# the command's default, then the preview (issue 5's benchmark setting)
+MODES = {"default": [], "fast": ["--quality", "fast"]}
 
 _CHILD = """
 import resource, sys
@@ -50,7 +50,8 @@ from metasensor.cli import app
 try:
     app(args=sys.argv[1:], standalone_mode=False)
 finally:
-    print("PEAK_RSS_KB " + str(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss))
+    use = resource.getrusage(resource.RUSAGE_SELF)
+    print("PEAK_RSS_KB " + str(use.ru_maxrss) + " CPU_S " + str(use.ru_utime + use.ru_stime))
 """
 
 
@@ -73,6 +74,17 @@ def _write_tiled_store(path: Path, small: np.ndarray, shape: tuple[int, int], cf
             arr[u, v] = np.maximum(plane + noise, 0.0)
     arr.attrs.update({"metasensor": {"kind": "views", "view_shape": [n, n, *shape],
                                      "config": cfg.to_dict()}})
+
+
+def _write_partial(rows: list[dict], partial: bool) -> None:
+    """results/stream.json after each row of a full run (run_all.py rewrites it at the end)."""
+    from metasensor.io.atomic import atomic_write_text
+    from run_all import machine
+
+    payload = {"benchmark": "stream", "quick": False, "partial": partial, "machine": machine(),
+               "rows": rows}
+    atomic_write_text(HERE / "results" / "stream.json", json.dumps(payload, indent=2,
+                                                                   default=float))
 
 
 def _du(path: Path) -> int:
@@ -107,33 +119,39 @@ def run(quick: bool = False) -> list[dict]:
         t0 = time.perf_counter()
         _write_tiled_store(store, clean, shape, cfg, var)
         write_s = time.perf_counter() - t0
-        rows = [_reconstruct_row(store, work / f"result-{solver}", solver, case, cfg, cap,
-                                 truth, shape, image_shape, write_s, sigma, var)
-                for solver in SOLVERS]
+        rows = []
+        for mode in MODES:
+            rows.append(_reconstruct_row(store, work / f"result-{mode}", mode, case, cfg, cap,
+                                         truth, shape, image_shape, write_s, sigma, var))
+            if not quick:
+                _write_partial(rows, len(rows) < len(MODES))
         return rows
     finally:
         shutil.rmtree(work, ignore_errors=True)
 
 
-def _reconstruct_row(store, out, solver, case, cfg, cap, truth, shape, image_shape, write_s,
+def _reconstruct_row(store, out, mode, case, cfg, cap, truth, shape, image_shape, write_s,
                      sigma, var) -> dict:
-    """Run ``metasensor reconstruct`` on the store in a child process with ``solver`` (RL: 5
-    iterations; HQS: its defaults) and measure it."""
+    """Run ``metasensor reconstruct`` on the store in a child process in ``mode`` (a key of
+    :data:`MODES`) and measure it."""
+    import os
+
     import zarr
 
     import metasensor as ms
     from metasensor.metrics import ssim
 
-    extra = ["--iterations", str(ITERATIONS)] if solver == "rl" else []
     args = ["reconstruct", str(store), "--out", str(out), "--blocks", case["blocks"],
-            "--solver", solver, *extra, "--zarr"]
+            *MODES[mode], "--zarr"]
+    load0 = os.getloadavg()[0]
     t0 = time.perf_counter()
     proc = subprocess.run([sys.executable, "-c", _CHILD, *args], capture_output=True,
                           text=True, check=False)
     wall = time.perf_counter() - t0
     if proc.returncode != 0:
         raise RuntimeError(f"reconstruct failed: {proc.stderr.strip()[-2000:]}")
-    peak_kb = int(proc.stdout.rsplit("PEAK_RSS_KB", 1)[1].split()[0])
+    tail = proc.stdout.rsplit("PEAK_RSS_KB", 1)[1].split()
+    peak_kb, cpu_s = int(tail[0]), float(tail[2])
     summary = json.loads((out / "summary.json").read_text())
     image = zarr.open_array(str(out / "image.zarr"), mode="r")
     # a crop of 4 x 4 tiles in the middle, against the tiled truth
@@ -144,8 +162,10 @@ def _reconstruct_row(store, out, solver, case, cfg, cap, truth, shape, image_sha
     crop = np.asarray(image[y0:y0 + side, x0:x0 + side])
     tiled = np.tile(truth, (side // ty, side // tx))
     rng = float(truth.max() - truth.min())
+    solver = "hqs" if mode == "default" else "rl"
     kw = {"iterations": ITERATIONS} if solver == "rl" else {}
-    alone = ms.reconstruct(cap.views, cfg, solver=solver, **kw).image
+    method = "auto" if mode == "default" else "none"
+    alone = ms.reconstruct(cap.views, cfg, method=method, solver=solver, **kw).image
     alone = alone[TILE_PX:2 * TILE_PX, TILE_PX:2 * TILE_PX]
     views_bytes = int(np.prod((cfg.nnum, cfg.nnum, *shape))) * 4
     row = {"sensor_px": f"{case['sensor'][0]}x{case['sensor'][1]}",
@@ -153,11 +173,13 @@ def _reconstruct_row(store, out, solver, case, cfg, cap, truth, shape, image_sha
            "megapixels": image_shape[0] * image_shape[1] / 1e6,
            "noise_rms": sigma, "noise_var_fit": [round(v, 4) for v in var],
            "views_gb": views_bytes / 1e9, "store_gb": _du(store) / 1e9,
-           "blocks": case["blocks"], "solver": solver,
+           "blocks": case["blocks"], "mode": mode, "solver": solver, "dao": summary.get(
+               "method"),
            "iterations": ITERATIONS if solver == "rl" else None,
            "peak_rss_gb": peak_kb * 1024 / 1e9,
            "rss_over_views": peak_kb * 1024 / views_bytes,
            "write_store_s": write_s, "wall_s": wall, "recon_s": summary["seconds"],
+           "cpu_s": cpu_s, "load_1min_before_after": [load0, os.getloadavg()[0]],
            "s_per_mp": summary["seconds"] / (image_shape[0] * image_shape[1] / 1e6),
            "finite_nonneg": bool(np.isfinite(crop).all() and crop.min() >= 0),
            "ssim_crop": ssim(truth=tiled, image=crop, data_range=rng),

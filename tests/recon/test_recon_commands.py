@@ -262,3 +262,25 @@ def test_psf_bank_of_another_nnum_is_named(files, tmp_path):
                                    str(bank_file), "--out", str(tmp_path / "r")])
     assert res.exit_code != 0
     assert "made for nnum 3" in str(res.exception) and "nnum 5" in str(res.exception)
+
+
+def test_quality_fast_is_a_richardson_lucy_preview_without_an_estimate(files, tmp_path):
+    # --quality fast: Richardson-Lucy (its default 5 iterations) and --dao auto estimates
+    # nothing; with --solver hqs it contradicts itself and is refused, naming the option.
+    from metasensor.recon.commands import ReconstructArgs
+
+    args = ReconstructArgs(views=files / "views.tif", out=tmp_path, quality="fast")
+    assert args.dao == "none" and args.isa_solver == "rl"
+    assert ReconstructArgs(views=files / "views.tif", out=tmp_path, quality="fast",
+                           method="wave").dao == "wave"
+    assert ReconstructArgs(views=files / "views.tif", out=tmp_path).isa_solver is None
+    out = tmp_path / "fast"
+    res = CliRunner().invoke(app, ["reconstruct", str(files / "views.tif"), "--psf",
+                                   str(files / "psf.h5"), "--quality", "fast", "--workers", "2",
+                                   "--blocks", "2x1", "--overlap", "6", "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["solver"] == "rl" and len(summary["history"][0][0]) == 5
+    res = CliRunner().invoke(app, ["reconstruct", str(files / "views.tif"), "--quality", "fast",
+                                   "--solver", "hqs", "--out", str(tmp_path / "x")])
+    assert res.exit_code != 0 and "--quality fast" in str(res.exception)

@@ -165,19 +165,14 @@ def _refine_shifts(reference: torch.Tensor, moving: torch.Tensor, shifts: torch.
         r, valid = _warp(reference, s)
         gy, gx = _gradients(r)
         wgt = win * valid
-        # model a·r(p − s) + c; Jacobian columns (−a ∂y r, −a ∂x r, r, 1); a is absorbed below
-        cols = [-gy, -gx, r, torch.ones_like(r)]
-        normal = torch.empty((b, 4, 4), dtype=torch.float64, device=r.device)
-        rhs = torch.empty((b, 4), dtype=torch.float64, device=r.device)
-        wm = wgt * moving
-        for i in range(4):
-            wi = wgt * cols[i]
-            rhs[:, i] = (wi * moving).sum(dim=(-2, -1)).double() if i < 3 else wm.sum(
-                dim=(-2, -1)).double()
-            for j in range(i, 4):
-                val = (wi * cols[j]).sum(dim=(-2, -1)).double()
-                normal[:, i, j] = val
-                normal[:, j, i] = val
+        # model a·r(p − s) + c; Jacobian columns (−a ∂y r, −a ∂x r, r, 1); a is absorbed below.
+        # The weighted normal equations as two batched products (B, 4, HW) x (B, HW, 4 | 1)
+        cols = torch.stack([-gy, -gx, r, torch.ones_like(r)], dim=1).reshape(b, 4, -1)
+        wcols = cols * wgt.reshape(-1, 1, cols.shape[-1])
+        del gy, gx, r
+        normal = torch.bmm(wcols, cols.transpose(1, 2)).double()
+        rhs = torch.bmm(wcols, moving.reshape(b, -1, 1))[:, :, 0].double()
+        del cols, wcols
         # linear least squares of moving on (−∂y r, −∂x r, r, 1): the coefficients are
         # (a·δy, a·δx, a, c) for the first-order model a·r(p − s − δ) + c
         coef = torch.linalg.solve(normal + eye, rhs[:, :, None])[:, :, 0]

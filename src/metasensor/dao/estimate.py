@@ -146,10 +146,11 @@ class _Run:
         return None if size is None else int(size)
 
     def bank(self) -> np.ndarray:
-        """The bank of the current estimate: one-off, so not cached."""
+        """The bank of the current estimate: one-off, so not cached, except the start's (every
+        block that starts from the same wavefront, e.g. none, shares it)."""
         if self.opts.method == "wave":
             return psf_bank(self.cfg, self.phi, self.amplitude, self.device,
-                            self.size(self.phi), cache=False)
+                            self.size(self.phi), cache=not self.history)
         return geometric_psfs(self.ideal, self.total, self.device)
 
 

@@ -66,6 +66,10 @@ class ReconstructArgs:
         "unauthenticated TCP; use a private network or tls://)")] = None
     device: Annotated[str | None, typer.Option(
         help="cpu or cuda (default: cuda if present)")] = None
+    quality: Annotated[str, typer.Option(
+        "--quality", help="default: the sparse-gradient solver (HQS), the aberration per --dao | "
+        "fast: a preview, Richardson-Lucy (5 iterations), and no aberration estimate unless "
+        "--dao wave/geometric asks for one")] = "default"
     workers: Annotated[int, typer.Option(
         "--workers", min=1, help="blocks reconstructed at once (threads sharing this process's "
         "torch threads); each block in flight holds its own spectra and work arrays")] = 1
@@ -86,9 +90,24 @@ class ReconstructArgs:
             raise ValueError("give either --system or --field-zernike, not both")
         from metasensor.recon.dao_choice import DAO_CHOICES
 
+        if self.quality not in ("default", "fast"):
+            raise ValueError(f"--quality must be default or fast, got {self.quality!r}")
+        if self.quality == "fast" and self.solver == "hqs":
+            raise ValueError("--quality fast runs Richardson-Lucy: drop --solver hqs (or use "
+                             "--quality default)")
         if self.method not in DAO_CHOICES:
             raise ValueError(f"--dao must be one of {', '.join(DAO_CHOICES)}, got "
                              f"{self.method!r}")
+
+    @property
+    def dao(self) -> str:
+        """The DAO mode run: ``--dao``, except that a fast preview skips ``auto``'s estimate."""
+        return "none" if self.quality == "fast" and self.method == "auto" else self.method
+
+    @property
+    def isa_solver(self) -> str | None:
+        """The solver asked for (None: the default rule)."""
+        return "rl" if self.quality == "fast" else self.solver
 
     def provenance(self, cfg) -> dict:
         """The inputs' checksums and the settings, for ``summary.json``."""
@@ -96,7 +115,7 @@ class ReconstructArgs:
 
         return provenance({"views": self.views, "psf": self.psf, "config": self.config,
                            "system": self.system, "field_zernike": self.field_zernike},
-                          {"method": self.method, "blocks": self.blocks,
+                          {"method": self.dao, "blocks": self.blocks, "quality": self.quality,
                            "overlap": self.overlap, "solver": self.solver,
                            "iterations": self.iterations, "subsets": self.subsets,
                            "view_radius": self.view_radius, "zernike": self.zernike,
@@ -108,7 +127,7 @@ def _recon_options(args: ReconstructArgs, bank, target):
     from metasensor.recon.options import ReconOptions
 
     return ReconOptions(overlap=args.overlap, iterations=args.iterations, subsets=args.subsets,
-                        solver=args.solver, register=args.register_views,
+                        solver=args.isa_solver, register=args.register_views,
                         view_radius=args.view_radius, device=args.device, psf=bank,
                         scheduler=args.scheduler, num_workers=args.workers, out=target,
                         progress=True)
@@ -150,11 +169,11 @@ def _say_dao(args: ReconstructArgs, inputs) -> None:
     given = inputs.field_zernike is not None or (z is not None and bool(np.any(z)))
     bank = inputs.bank is not None
     unavailable = None
-    if args.method == "auto" and not (given or bank):
+    if args.dao == "auto" and not (given or bank):
         from metasensor.dao.estimate import dao_unavailable
 
         unavailable = dao_unavailable(inputs.config)
-    choice = choose_dao(args.method, aberration_given=given, bank_given=bank,
+    choice = choose_dao(args.dao, aberration_given=given, bank_given=bank,
                         unavailable=unavailable)
     typer.echo(f"aberration: {choice.reason}", err=True)
 
@@ -182,7 +201,7 @@ def run_reconstruct(args: ReconstructArgs) -> None:
     staged, target = _zarr_target(args, cfg, stack) if args.zarr_out else (None, None)
     _say_dao(args, inputs)
     try:
-        rec = reconstruct(stack, cfg, method=args.method, zernike=parse_zernike(args.zernike),
+        rec = reconstruct(stack, cfg, method=args.dao, zernike=parse_zernike(args.zernike),
                           field_zernike=inputs.field_zernike,
                           blocks=parse_pair(args.blocks, "--blocks"),
                           options=_recon_options(args, inputs.bank, target))
