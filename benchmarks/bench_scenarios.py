@@ -27,9 +27,10 @@ Rows:
   estimate per window can find); and the largest true motion of any view between the
   period's frames (view px, :func:`metasensor.scenarios.truth.view_motion`).
 
-``python benchmarks/bench_scenarios.py --telescope [--quick]`` runs the three telescope rows alone
-(``--gigapixel``: the gigapixel demo, ``stitch`` and ``stitch-cluster`` rows) and puts them into
-the results JSON in place of the old ones (the other rows kept).
+``python benchmarks/bench_scenarios.py --telescope [--quick] [--no-simulation]`` runs the three
+telescope rows alone (``--no-simulation``: not the simulation's), ``--gigapixel`` the gigapixel
+demo, ``stitch`` and ``stitch-cluster`` rows; each row goes into the results JSON in place of
+the old one (the other rows kept).
 """
 
 from __future__ import annotations
@@ -323,12 +324,17 @@ def telescope_truth(quick: bool = False) -> dict:
                                    "max": float(np.max(motion))}}
 
 
-def telescope_rows(quick: bool = False, save: bool = False) -> list[dict]:
-    """The simulation's row and the telescope demo's (:func:`_scenario_rows` for it alone);
-    ``save``: each put into the results JSON as soon as it is measured (:func:`merge_rows`)."""
+def telescope_rows(quick: bool = False, save: bool = False, simulation: bool = True
+                   ) -> list[dict]:
+    """The truth's row, the simulation's (``simulation``) and the telescope demo's
+    (:func:`_scenario_rows` for it alone); ``save``: each put into the results JSON as soon as
+    it is measured (:func:`merge_rows`)."""
     rows = []
-    for make in (lambda: [telescope_truth(quick)], lambda: [telescope_simulation(quick)],
-                 lambda: _scenario_rows(quick, names=("telescope",))):
+    makers = [lambda: [telescope_truth(quick)]]
+    if simulation:
+        makers.append(lambda: [telescope_simulation(quick)])
+    makers.append(lambda: _scenario_rows(quick, names=("telescope",)))
+    for make in makers:
         rows += make()
         if save:
             merge_rows(rows[-1:], quick)
@@ -387,7 +393,10 @@ if __name__ == "__main__":
     if "--telescope" in sys.argv or "--gigapixel" in sys.argv:
         sys.path.insert(0, str(HERE))
         quick = "--quick" in sys.argv
-        rows = telescope_rows if "--telescope" in sys.argv else gigapixel_rows
-        print(json.dumps(rows(quick, save=True), indent=1))
+        if "--telescope" in sys.argv:
+            rows = telescope_rows(quick, save=True, simulation="--no-simulation" not in sys.argv)
+        else:
+            rows = gigapixel_rows(quick, save=True)
+        print(json.dumps(rows, indent=1))
     else:
         print(json.dumps(run(quick="--quick" in sys.argv), indent=1))

@@ -8,7 +8,8 @@ every frame of the scan has its own wavefront; the upper layer's footprint moves
 field, so the field sees different aberrations). ``periods`` scan periods are simulated as one
 sequence. Processing uses the public API only: the first scan window is realigned
 (``ms.realign``) and every view motion-corrected by non-rigid registration
-(:func:`metasensor.motion.correct.correct_motion_views`, mode "turbulence"); the pupil's
+(:func:`metasensor.motion.correct.correct_motion_views`, mode "turbulence") if a probe of the
+sharpest views finds measurable motion (:func:`correct_if_moving`); the pupil's
 obstruction is estimated from those views
 (:func:`~metasensor.scenarios.pupil.estimate_annulus`) and used for the PSFs; the image is
 reconstructed without DAO (ISA with the ideal annular PSFs) and with multisite wave DAO
@@ -37,7 +38,7 @@ import numpy as np
 
 from metasensor.scenarios.report import ScenarioSettings
 
-__all__ = ["TelescopeSettings", "run_telescope"]
+__all__ = ["TelescopeSettings", "run_telescope", "correct_if_moving"]
 
 
 @dataclass(frozen=True)
@@ -49,7 +50,9 @@ class TelescopeSettings(ScenarioSettings):
     Richardson–Lucy with this many iterations (a second solver beside ``iterations``'s, so a
     gain that one solver's artefacts make is seen; None: not);
     key_every, sim_subsample : the simulator's sampling of the evolving turbulence
-    (:class:`~metasensor.simulation.turbulence.Turbulence` ``key_every`` and ``subsample``)."""
+    (:class:`~metasensor.simulation.turbulence.Turbulence` ``key_every`` and ``subsample``);
+    motion_probe : views registered first to see whether the views move measurably (0: every
+    view is motion-corrected without a probe; :func:`correct_if_moving`)."""
 
     size: int = 192
     obstruction: float = 0.35
@@ -59,8 +62,12 @@ class TelescopeSettings(ScenarioSettings):
     key_every: int = 6
     sim_subsample: int = 1
     check_iterations: int | None = 8
+    motion_probe: int = 8
 
     def __post_init__(self) -> None:
+        if isinstance(self.motion_probe, bool) or not (
+                isinstance(self.motion_probe, int) and self.motion_probe >= 0):
+            raise ValueError(f"motion_probe must be an integer >= 0, got {self.motion_probe!r}")
         if not (isinstance(self.size, int) and self.size >= 192):  # 12 lenslets: the views'
             # motion correction needs 12 samples per scan period and axis
             raise ValueError(f"size must be an integer >= 192, got {self.size!r}")
@@ -73,6 +80,48 @@ class TelescopeSettings(ScenarioSettings):
             raise ValueError(f"check_iterations must be None or a positive integer, got {it!r}")
         if self.periods < 2 or self.stride < 1 or min(self.blocks) < 1:
             raise ValueError("periods must be >= 2, stride and blocks >= 1")
+
+
+def correct_if_moving(views: np.ndarray, order, reference: int, probe: int = 8
+                      ) -> tuple[np.ndarray, dict]:
+    """Per-view non-rigid motion correction of a view stack
+    (:func:`~metasensor.motion.correct.correct_motion_views`, mode "turbulence") where the views
+    move measurably.
+
+    The ``probe`` views that resolve the most of their content on the scan's sub-image grid
+    (mean :func:`~metasensor.motion.consistency.resolved_fraction`, the registration's own
+    evidence measure) are registered first (:func:`~metasensor.motion.correct.estimate_motion`,
+    method "registration", its defaults: motion below 0.5 view px, or that does not make the
+    dense view more consistent, is zero). If none of them moves, the other views are not
+    registered either and the stack is returned as float32, unchanged; else every view is
+    corrected. ``probe`` 0: every view is corrected without a probe.
+
+    Returns
+    -------
+    (views, info)
+        The (corrected) stack, and ``info``: ``probe_views`` (count), ``probe_moving_fraction``
+        (mean fraction of the probed views' samples with a motion; None without a probe),
+        ``corrected`` (whether every view went through the correction).
+    """
+    from metasensor.motion.consistency import resolved_fraction
+    from metasensor.motion.correct import correct_motion_views, estimate_motion
+
+    n = views.shape[0]
+    info = {"probe_views": 0, "probe_moving_fraction": None, "corrected": True}
+    if probe > 0:
+        period = int(round(len(order) ** 0.5))
+        live = [(u, v) for u in range(n) for v in range(n) if np.any(views[u, v])]
+        score = {uv: float(resolved_fraction(views[uv], period).mean()) for uv in live}
+        chosen = sorted(live, key=lambda uv: -score[uv])[:probe]
+        moving = [float(np.mean(estimate_motion(views[uv], order, reference,
+                                                method="registration") != 0))
+                  for uv in chosen]
+        info.update(probe_views=len(chosen), probe_moving_fraction=float(np.mean(moving)))
+        if not any(moving):
+            info["corrected"] = False
+            return np.asarray(views, dtype=np.float32).copy(), info
+    return correct_motion_views(views, order, reference=reference, mode="turbulence",
+                                progress=False), info
 
 
 class _Clock:
@@ -138,6 +187,19 @@ def _residuals(rec, turb, n: int, blocks) -> dict[str, np.ndarray]:
     return out
 
 
+def _true_motion(turb, cfg, views) -> dict:
+    """R.m.s. and largest true motion (view px) of the lit views between the first scan
+    period's frames and its reference frame (:func:`~metasensor.scenarios.truth.view_motion`
+    of the on-axis screens; the field's remainder is fixed during a period)."""
+    from metasensor.scenarios.truth import view_motion
+
+    n = cfg.scan**2
+    m = view_motion(turb.screens(n), cfg, n // 2)
+    lit = np.any(views, axis=(2, 3))
+    mag = np.hypot(m[..., 0], m[..., 1])[:, lit & np.isfinite(m[0, ..., 0])]
+    return {"rms": float(np.sqrt((mag**2).mean())), "max": float(mag.max())}
+
+
 def _simulate(s: TelescopeSettings, cfg, turb, scene) -> tuple[list, object]:
     """The captures of ``s.periods`` consecutive scan periods (the first with the 2D sensor)
     and a turbulence-free one (the kymograph's static reference), one intensity scale."""
@@ -177,7 +239,6 @@ def run_telescope(out: str | Path, settings: TelescopeSettings | None = None,
     """Run the scenario and write its report into ``out``; returns the summary."""
     import metasensor as ms
     from metasensor.metrics import psnr
-    from metasensor.motion.correct import correct_motion_views
     from metasensor.scenarios.pupil import estimate_annulus
     from metasensor.scenarios.report import scenario_run
     from metasensor.scenarios.screens import LayeredTurbulence
@@ -197,8 +258,7 @@ def run_telescope(out: str | Path, settings: TelescopeSettings | None = None,
         clock.lap("simulate")
         steps.update()
         views = ms.realign(cap.frames, cfg, cap.scan_order)
-        corrected = correct_motion_views(views, cap.scan_order, reference=n // 2, mode="turbulence",
-                                         progress=False)
+        corrected, moved = correct_if_moving(views, cap.scan_order, n // 2, s.motion_probe)
         est = estimate_annulus(corrected, cfg)
         cfg_est = cfg.replace(obstruction=round(est.obstruction, 3))
         clock.lap("motion_and_pupil")
@@ -245,6 +305,7 @@ def run_telescope(out: str | Path, settings: TelescopeSettings | None = None,
             "pupil": {"true_obstruction": s.obstruction, "estimated_obstruction": est.obstruction,
                       "error": abs(est.obstruction - s.obstruction), "blur_views": est.blur},
             "motion_corrected_fraction": float(np.mean(corrected != views)),
+            "motion": {**moved, "true_view_motion_px": _true_motion(turb, cfg, views)},
             "wavefront_residual_rms_waves": resid["mean"],
             "residual_max_waves": float(resid["mean"].max()),
             "residual_reference_frame_waves": resid["reference"],
