@@ -224,7 +224,7 @@ def _decide(vol, cands, gf, penalties: SemiGlobal, amax: float, steps: int):
     one candidate) from the window's, the window's (smoother, sub-candidate) estimate is kept;
     elsewhere (depth edges, thin structures: the window's estimate spreads the background over
     them) the semi-global one. The confidence is the peak ratio of the curve that decided."""
-    scale = normalise_costs(vol)
+    scale = normalise_costs(vol, noise=penalties.noise)
     total = semi_global(vol, penalties)
     d_sgm, i_sgm = subpixel_minimum(total, cands)
     c_sgm = peak_ratio_confidence(total, i_sgm)

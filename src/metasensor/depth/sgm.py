@@ -38,14 +38,18 @@ class SemiGlobal:
     p2 : penalty for a larger jump (a depth edge); ``0 < p1 < p2``.
     paths : scan lines through each pixel: 4 (rows and columns, both ways) or 8 (and the
         diagonals).
+    noise : the noise floor of :func:`normalise_costs` in units of the median per-pixel
+        minimum cost (> 0): the larger, the less a pixel of weak texture votes against its
+        neighbours.
     """
 
     p1: float = 0.3
     p2: float = 0.5
     paths: int = 4
+    noise: float = 8.0
 
     def __post_init__(self) -> None:
-        for name in ("p1", "p2"):
+        for name in ("p1", "p2", "noise"):
             value = getattr(self, name)
             if not (isinstance(value, int | float) and 0 < value < float("inf")):
                 raise ValueError(f"{name} must be a positive number, got {value!r}")
