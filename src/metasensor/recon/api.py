@@ -184,8 +184,30 @@ def _block_grid(blocks) -> tuple[int, int]:
         raise ValueError(f"blocks must be a pair (by, bx), got {blocks!r}") from None
 
 
-def _solver_options(opts: ReconOptions, solver: str, n_views: int, step: int):
-    """The resolved solver settings (RLOptions or HQSOptions) and RL's subsets."""
+def _noise_model(views, opts: ReconOptions):
+    """The Poisson–Gaussian model ``opts.noise_model`` asks for (fitted here for ``"fit"``:
+    once, on the whole stack), or None for one global weight."""
+    if not isinstance(opts.noise_model, str):
+        return opts.noise_model
+    if opts.noise_model == "global":
+        return None
+    import warnings
+
+    from metasensor.solvers.noise_fit import fit_poisson_gaussian
+
+    try:
+        return fit_poisson_gaussian(views).model
+    except ValueError as exc:
+        warnings.warn(f"reconstruct: the noise fit failed ({exc}); using one global noise "
+                      "weight", UserWarning, stacklevel=4)
+        return None
+
+
+def _solver_options(opts: ReconOptions, solver: str, n_views: int, step: int, noise=None):
+    """The resolved solver settings (RLOptions or HQSOptions) and RL's subsets; ``noise`` the
+    Poisson–Gaussian model (None: one global weight)."""
+    from dataclasses import replace
+
     from metasensor.solvers.hqs import HQSOptions
     from metasensor.solvers.richardson_lucy import DEFAULT_ITERATIONS, RLOptions, default_subsets
 
@@ -193,9 +215,13 @@ def _solver_options(opts: ReconOptions, solver: str, n_views: int, step: int):
     if subsets > n_views:
         raise ValueError(f"subsets must be at most the {n_views} views used, got {subsets}")
     if solver == "hqs":
-        return opts.solver_options or HQSOptions(), subsets
+        hqs_opts = opts.solver_options or HQSOptions()
+        if noise is not None and hqs_opts.noise_model is None:
+            hqs_opts = replace(hqs_opts, noise_model=noise)
+        return hqs_opts, subsets
     iterations = DEFAULT_ITERATIONS if opts.iterations is None else int(opts.iterations)
-    return RLOptions(iterations=iterations, subsets=subsets), subsets
+    shifted = noise if noise is not None and noise.a > 0 else None
+    return RLOptions(iterations=iterations, subsets=subsets, noise_model=shifted), subsets
 
 
 def _tasks(views, cfg: SystemConfig, method: str, grid, zern, opts: ReconOptions, plan: dict):
@@ -314,7 +340,7 @@ def reconstruct(views, cfg: SystemConfig, method: str = "isa", zernike=None, fie
     from metasensor.phasespace.views import subset_major, view_order
 
     uv = view_order(cfg.view_mask(opts.view_radius), opts.order)
-    solver_opts, subsets = _solver_options(opts, solver, len(uv), d)
+    solver_opts, subsets = _solver_options(opts, solver, len(uv), d, _noise_model(views, opts))
     corners = None
     if opts.space_variant:
         from metasensor.recon.space_variant import corner_zernikes

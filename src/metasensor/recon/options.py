@@ -11,10 +11,12 @@ import numpy as np
 from metasensor.dao.estimate import DaoOptions
 from metasensor.phasespace.views import ORDERS
 from metasensor.solvers.hqs import HQSOptions
+from metasensor.solvers.noise_model import PoissonGaussian
 
-__all__ = ["ReconOptions", "SOLVERS", "HQS_MAX_STEP"]
+__all__ = ["ReconOptions", "SOLVERS", "HQS_MAX_STEP", "NOISE_MODELS"]
 
 SOLVERS = ("rl", "hqs")
+NOISE_MODELS = ("global", "fit")
 HQS_MAX_STEP = 5  # HQS up to this scan step (pixels): a 1 x 1 scan would factor 225² systems
 
 
@@ -41,6 +43,15 @@ class ReconOptions:
         ``iterations``/``subsets`` is given or the scan step exceeds 5 px.
     solver_options : HQSOptions or None
         The HQS solver's settings (prior, ``lam_scale``, ``noise``, ...).
+    noise_model : str or PoissonGaussian
+        The views' noise (:mod:`metasensor.solvers.noise_model`): ``"global"`` (default: one
+        weight for every sample, the noise from ``solver_options.noise`` or the data), ``"fit"``
+        (a Poisson–Gaussian model fitted to the views once,
+        :func:`metasensor.solvers.noise_fit.fit_poisson_gaussian`; an unreliable fit warns once
+        and falls back to ``"global"``), or a :class:`PoissonGaussian` (e.g. from the capture's
+        metadata, ``PoissonGaussian.from_metadata(cap.noise)``). HQS weighs each sample by
+        ``1/var``; Richardson–Lucy takes the shifted-Poisson form. A model given in
+        ``solver_options`` wins.
     register : bool
         Register every block's views against its bank first
         (:mod:`metasensor.dao.bank_registration`; for banks that may be off). Default False.
@@ -84,6 +95,7 @@ class ReconOptions:
     subsets: int | None = None
     solver: str | None = None
     solver_options: HQSOptions | None = None
+    noise_model: Any = "global"
     register: bool = False
     view_radius: float | None = None
     order: str = "spiral"
@@ -115,6 +127,11 @@ class ReconOptions:
             raise ValueError(f"order must be one of {ORDERS}, got {self.order!r}")
         if self.solver_options is not None and not isinstance(self.solver_options, HQSOptions):
             raise TypeError("solver_options must be HQSOptions")
+        nm = self.noise_model
+        if not isinstance(nm, PoissonGaussian) and not (isinstance(nm, str)
+                                                         and nm in NOISE_MODELS):
+            raise ValueError(f"noise_model must be one of {NOISE_MODELS} or a PoissonGaussian, "
+                             f"got {nm!r}")
         if self.dao is not None and not isinstance(self.dao, DaoOptions):
             raise TypeError("dao must be DaoOptions")
         if not isinstance(self.space_variant, bool):

@@ -24,6 +24,12 @@ keeps the data's weight per image pixel (V / d² samples) that of the 5 x 5 scan
 the smoothness-regularised least-squares fit (weight ``init_reg``; the prior is not convex, so
 the start decides where it ends). The result is clipped at zero. Why each default is what it
 is: ``docs/decisions.md``.
+
+With a Poisson–Gaussian ``noise_model`` (:mod:`metasensor.solvers.noise_model`) the data term
+is weighted least squares, ``‖A x − y‖²_{MW}`` with ``W = σ²/var`` (mean 1; var from the smooth
+start's prediction, so the noise of the data does not bias the weights), and σ² the weights'
+reference variance; the x-step is then never circular: PCG on ``AᵀMWA + μ(LᵀL + εI)``, still
+preconditioned by the circular unweighted solve.
 """
 
 from __future__ import annotations
@@ -36,6 +42,7 @@ import torch
 
 from metasensor.phasespace.normal import FoldedNormal
 from metasensor.phasespace.operator import PhaseSpaceOperator
+from metasensor.solvers.noise_model import PoissonGaussian, sample_weights
 from metasensor.solvers.priors import GRADIENT, HyperLaplacian, Prior, Transform
 from metasensor.solvers.result import SolveResult
 from metasensor.solvers.splitting import Continuation, half_quadratic_splitting
@@ -63,6 +70,11 @@ class HQSOptions:
         λ·σ² when λ is derived (default 0.3).
     noise : float or None
         The views' noise r.m.s. in data units; None: :func:`estimate_noise`.
+    noise_model : PoissonGaussian or None
+        The views' Poisson–Gaussian noise (:mod:`metasensor.solvers.noise_model`): the data
+        term becomes weighted least squares, each sample weighed by ``1 / var`` of the smooth
+        start's prediction, and σ the harmonic mean of those variances (``noise`` is then
+        unused); None: one weight for every sample.
     continuation : Continuation
         The β schedule (default 1 → 4096 in steps of 2√2).
     inner : int
@@ -77,6 +89,7 @@ class HQSOptions:
     lam: float | None = None
     lam_scale: float = 0.3
     noise: float | None = None
+    noise_model: PoissonGaussian | None = None
     continuation: Continuation = Continuation(beta_max=4096.0)
     inner: int = 3
     cg: int = 3
@@ -94,6 +107,9 @@ class HQSOptions:
                 raise ValueError(f"{name} must be > 0, got {value!r}")
         if self.noise is not None and not (self.noise >= 0 and math.isfinite(self.noise)):
             raise ValueError(f"noise must be a non-negative number, got {self.noise!r}")
+        if self.noise_model is not None and not isinstance(self.noise_model, PoissonGaussian):
+            raise TypeError(f"noise_model must be a PoissonGaussian, got "
+                            f"{type(self.noise_model).__name__}")
         if not isinstance(self.continuation, Continuation):
             raise TypeError("continuation must be a Continuation")
         for name in ("inner", "cg"):
@@ -238,17 +254,38 @@ def _residual_norm(op, x: torch.Tensor, ax: torch.Tensor | None, aty: torch.Tens
     return math.sqrt(max(sq, 0.0))
 
 
+def _noise_weights(op, x, unit: float, m, options: HQSOptions):
+    """The data term's per-sample weights (mean 1, zero where unobserved; None: all equal) and
+    the noise σ they are relative to (data units; None: from ``noise`` or the data), from
+    ``noise_model`` and the prediction of the start ``x`` (:func:`sample_weights`)."""
+    if options.noise_model is None:
+        return None, None
+    weights, sigma2 = sample_weights(options.noise_model, op.forward(x) * unit, m)
+    return weights, math.sqrt(sigma2)
+
+
+def _weighted_normal(op, weights: torch.Tensor) -> Callable[[torch.Tensor], torch.Tensor]:
+    """v -> AᵀWA v, ``weights`` (V, My, Mx) zero where unobserved."""
+    return lambda v: op.adjoint(op.forward(v) * weights)
+
+
 def _data_weight(op: PhaseSpaceOperator, smooth: FoldedXStep, aty, y, m, unit: float,
-                 options: HQSOptions) -> float:
-    """λ (module docstring): lam_scale / σ² · (d / 3)², σ = max(noise, model misfit)."""
+                 options: HQSOptions, weights=None, sigma=None) -> float:
+    """λ (module docstring): lam_scale / σ² · (d / 3)², σ = max(noise, model misfit); with
+    ``weights``, the misfit is weighted and σ is the weights' reference σ."""
     if options.lam is not None:
         return float(options.lam)
     mf = m.to(torch.float32)
     yn = y / unit
-    sigma = estimate_noise(y, m) if options.noise is None else float(options.noise)
+    if sigma is None:
+        sigma = estimate_noise(y, m) if options.noise is None else float(options.noise)
     fit = smooth.at(MISFIT_REG * smooth.scale)(aty, None)
     n_obs = max(float(mf.sum()) * yn.shape[0], 1.0)
-    misfit = _residual_norm(op, fit, smooth.data_product(fit), aty, yn, mf) / math.sqrt(n_obs)
+    if weights is None:
+        resid = _residual_norm(op, fit, smooth.data_product(fit), aty, yn, mf)
+    else:
+        resid = float(torch.linalg.vector_norm((op.forward(fit) - yn) * weights.sqrt()))
+    misfit = resid / math.sqrt(n_obs)
     sigma_n = max(sigma / unit, misfit, 1e-6 * float(yn[:, m].abs().mean()))
     lam = options.lam_scale / sigma_n**2 * (op.geometry.d / REF_STEP) ** 2
     if not (lam > 0 and math.isfinite(lam)):
@@ -294,18 +331,26 @@ def hqs(op: PhaseSpaceOperator, y, mask, options: HQSOptions = HQSOptions(), *,
     smooth = FoldedXStep(nm, data_normal, m, GRADIENT, REG_FLOOR, INIT_CG, exact)
     aty = op.adjoint(yn)
     x = smooth.at(options.init_reg * smooth.scale)(aty, None)  # the smooth start
-    xstep = FoldedXStep(nm, data_normal, m, options.prior.transform, REG_FLOOR, options.cg,
-                        exact)
-    xstep.carry(smooth)  # the start's AᵀMA x: the first x-step needs no product for it
-    lam = _data_weight(op, smooth, aty, y, m, unit, options)
+    weights, sigma = _noise_weights(op, x, unit, m, options)
+    loop_aty = aty
+    if weights is None:
+        xstep = FoldedXStep(nm, data_normal, m, options.prior.transform, REG_FLOOR, options.cg,
+                            exact)
+        xstep.carry(smooth)  # the start's AᵀMA x: the first x-step needs no product for it
+    else:  # weighted least squares: PCG on AᵀMWA, the folded AᵀA its preconditioner
+        xstep = FoldedXStep(nm, _weighted_normal(op, weights), m, options.prior.transform,
+                            REG_FLOOR, options.cg, exact=False)
+        loop_aty = op.adjoint(yn * weights)
+    lam = _data_weight(op, smooth, aty, y, m, unit, options, weights, sigma)
     norm_y = max(float(torch.linalg.vector_norm(yn)), 1e-30)
     history: list[float] = []
 
     def on_beta(xb: torch.Tensor) -> None:
-        history.append(_residual_norm(op, xb, xstep.data_product(xb), aty, yn, mf) / norm_y)
+        ax = xstep.data_product(xb) if weights is None else None  # unweighted residual
+        history.append(_residual_norm(op, xb, ax, aty, yn, mf) / norm_y)
         if progress is not None:
             progress(1)
 
-    x = half_quadratic_splitting(x, aty, xstep, options.prior, lam,
+    x = half_quadratic_splitting(x, loop_aty, xstep, options.prior, lam,
                                  options.continuation.betas(), options.inner, on_beta)
     return SolveResult(torch.clamp(x, min=0.0) * unit, history)

@@ -16,6 +16,11 @@ Non-negative by construction; every division is guarded (no NaN, no Inf): a pred
 ``eps`` (relative to the data's mean) counts as ``eps``; where the normaliser is below
 :data:`SENS_FLOOR` of its maximum (pixels hardly any observed sample sees) the estimate is left
 unchanged. The defaults' measurements: ``docs/decisions.md``.
+
+With a Poisson–Gaussian ``noise_model`` (:mod:`metasensor.solvers.noise_model`, ``a > 0``) the
+update is the shifted-Poisson form of Snyder, Hammoud & White (JOSA A 10, 1014–1023, 1993) for
+read noise: ``y + c`` is treated as Poisson with mean ``A I + c``, ``c = b / a`` (data units),
+i.e. the ratio is ``(y + c) / (A I + c)`` (samples below ``−c`` count as ``−c``).
 """
 
 from __future__ import annotations
@@ -27,6 +32,7 @@ import torch
 
 from metasensor.phasespace.operator import PhaseSpaceOperator
 from metasensor.phasespace.views import subset_runs
+from metasensor.solvers.noise_model import PoissonGaussian
 from metasensor.solvers.result import SolveResult
 
 __all__ = ["RLOptions", "richardson_lucy", "default_subsets", "DEFAULT_ITERATIONS",
@@ -57,11 +63,15 @@ class RLOptions:
         k-th consecutive run of the operator's views.
     eps : float
         Smallest predicted sample, relative to the data's mean (default 1e-6).
+    noise_model : PoissonGaussian or None
+        The views' Poisson–Gaussian noise, ``a > 0``: the shifted-Poisson update (module
+        docstring); None: plain Poisson.
     """
 
     iterations: int = DEFAULT_ITERATIONS
     subsets: int = DEFAULT_SUBSETS
     eps: float = 1e-6
+    noise_model: PoissonGaussian | None = None
 
     def __post_init__(self) -> None:
         for name, low in (("iterations", 0), ("subsets", 1)):
@@ -70,6 +80,18 @@ class RLOptions:
                 raise ValueError(f"{name} must be an integer >= {low}, got {value!r}")
         if not (isinstance(self.eps, int | float) and self.eps > 0 and math.isfinite(self.eps)):
             raise ValueError(f"eps must be a positive number, got {self.eps!r}")
+        if self.noise_model is not None:
+            if not isinstance(self.noise_model, PoissonGaussian):
+                raise TypeError(f"noise_model must be a PoissonGaussian, got "
+                                f"{type(self.noise_model).__name__}")
+            if not self.noise_model.a > 0:
+                raise ValueError("noise_model: Richardson-Lucy's shifted-Poisson form needs "
+                                 "a > 0 (signal-dependent noise)")
+
+    @property
+    def shift(self) -> float:
+        """The shifted-Poisson offset ``b / a`` (data units; 0 without a noise model)."""
+        return 0.0 if self.noise_model is None else self.noise_model.shift
 
     @property
     def steps(self) -> int:
@@ -85,8 +107,10 @@ def _sensitivities(op: PhaseSpaceOperator, maskf: torch.Tensor, runs: list[slice
     return sens, valid
 
 
-def _subset_update(op: PhaseSpaceOperator, estimate, data, maskf, run: slice, floor: float):
-    """Back-projected ratio Aᵀ_S(y_S / A_S I) of one subset and its squared residual."""
+def _subset_update(op: PhaseSpaceOperator, estimate, data, maskf, run: slice, floor: float,
+                   shift: float = 0.0):
+    """Back-projected ratio Aᵀ_S((y_S + c) / (A_S I + c)) of one subset (``data`` is y + c,
+    c = ``shift``) and its squared residual."""
     spec = op.spectrum(estimate)
     acc = op.new_conj_accumulator()
     sq = 0.0
@@ -94,6 +118,8 @@ def _subset_update(op: PhaseSpaceOperator, estimate, data, maskf, run: slice, fl
         c = slice(start, min(start + op.chunk, run.stop))
         pred = op.predict(spec, c)
         y = data[c]
+        if shift:
+            pred.add_(shift)
         resid = torch.sub(y, pred).mul_(maskf)
         sq += float(torch.vdot(resid.flatten(), resid.flatten()))
         ratio = torch.div(y, pred.clamp_(min=floor), out=pred).mul_(maskf)
@@ -111,7 +137,8 @@ def richardson_lucy(op: PhaseSpaceOperator, y, mask, options: RLOptions = RLOpti
         The forward model.
     y : array_like
         ``(V, My, Mx)`` view samples on the domain's sample grid (zero where unobserved), in the
-        operator's view order; not modified (negative and NaN samples count as 0).
+        operator's view order; not modified (negative and NaN samples count as 0; with a
+        noise model, samples below ``−b/a`` count as ``−b/a`` and NaN as 0).
     mask : array_like
         ``(My, Mx)`` bool, True on observed samples.
     options : RLOptions
@@ -129,7 +156,8 @@ def richardson_lucy(op: PhaseSpaceOperator, y, mask, options: RLOptions = RLOpti
     """
     data, mask_t = op.samples_and_mask(y, mask)
     maskf = mask_t.to(torch.float32)
-    data = torch.clamp(torch.nan_to_num(data, nan=0.0), min=0.0) * maskf
+    shift = options.shift
+    data = torch.clamp(torch.nan_to_num(data, nan=0.0), min=-shift) * maskf
     n_obs = max(float(maskf.sum()) * op.n_views, 1.0)
     floor = options.eps * max(float(data.sum()) / n_obs, 1e-30)
     data_norm = max(float(torch.linalg.vector_norm(data)), 1e-30)
@@ -142,11 +170,13 @@ def richardson_lucy(op: PhaseSpaceOperator, y, mask, options: RLOptions = RLOpti
     else:
         estimate = torch.clamp(torch.as_tensor(init, dtype=torch.float32, device=op.device),
                                min=0).clone()
+    if shift:
+        data = data + shift * maskf  # y + c
     history: list[float] = []
     for _ in range(options.iterations):
         sq = 0.0
         for run, s, v in zip(runs, sens, valid, strict=True):
-            back, sq_run = _subset_update(op, estimate, data, maskf, run, floor)
+            back, sq_run = _subset_update(op, estimate, data, maskf, run, floor, shift)
             sq += sq_run
             estimate = estimate * torch.where(v, torch.clamp(back, min=0.0) / s,
                                               torch.ones_like(s))

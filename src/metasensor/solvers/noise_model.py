@@ -1,0 +1,137 @@
+"""The Poisson–Gaussian noise model of the view samples and the data-term weights it gives.
+
+Every view sample is one sensor pixel, read as ``y = g·(Poisson(s/g) + N(0, r²))`` DN (photon
+shot noise, read noise, then quantisation; :mod:`metasensor.simulation.noise`), so
+
+    var(y) = a·s + b,    a = g [DN per electron],   b = (g·r)² + 1/12 [DN²]
+
+(Foi et al., IEEE TIP 17, 1737–1754, 2008: the Poissonian–Gaussian model of raw data). The
+model comes from the capture's metadata (:meth:`PoissonGaussian.from_metadata`: gain, read
+noise, bit depth as the simulator writes them) or is fitted to the views
+(:func:`metasensor.solvers.noise_fit.fit_poisson_gaussian`).
+
+Weighted least squares (the HQS data term, :mod:`metasensor.solvers.hqs`) weighs a sample by
+``1 / var``; :func:`sample_weights` returns those weights normalised to mean 1 over the observed
+samples, and the reference variance ``σ²`` they are relative to (the harmonic mean of the
+variances), so that ``σ²·W = 1 / var``. With ``a = 0`` every weight is exactly 1 and
+``σ² = b``: the unweighted data term. Richardson–Lucy takes the model as the shifted-Poisson
+form of Snyder, Hammoud & White (JOSA A 10, 1014–1023, 1993): ``y + b/a`` is nearly Poisson
+(in units of ``a``) with mean ``A x + b/a``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import torch
+
+__all__ = ["PoissonGaussian", "sample_weights", "VARIANCE_FLOOR"]
+
+#: smallest variance a weight uses, relative to the model's variance at the data's mean
+VARIANCE_FLOOR = 1e-3
+
+
+def _finite(name: str, value) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+        raise ValueError(f"{name} must be a finite number, got {value!r}")
+    return float(value)
+
+
+@dataclass(frozen=True)
+class PoissonGaussian:
+    """``var(y) = a·max(y, 0) + b`` of a view sample ``y`` (data units, e.g. DN) (frozen,
+    validated).
+
+    Attributes
+    ----------
+    a : float
+        Slope, data units per photo-electron (the gain), >= 0; 0: signal-independent noise.
+    b : float
+        Intercept, data units² (read-noise variance plus quantisation), >= 0; ``a + b > 0``.
+    source : str
+        Where the values come from: ``"given"``, ``"metadata"`` or ``"fit"``.
+    """
+
+    a: float
+    b: float
+    source: str = "given"
+
+    def __post_init__(self) -> None:
+        a, b = _finite("a", self.a), _finite("b", self.b)
+        if a < 0:
+            raise ValueError(f"a (the gain, data units per electron) must be >= 0, got {a!r}")
+        if b < 0:
+            raise ValueError(f"b (the read-noise variance) must be >= 0, got {b!r}")
+        if a + b <= 0:
+            raise ValueError("a and b are both 0: a noise model needs some noise")
+        if self.source not in ("given", "metadata", "fit"):
+            raise ValueError(f"source must be 'given', 'metadata' or 'fit', got {self.source!r}")
+
+    @classmethod
+    def from_gain(cls, gain: float, read_noise: float, quantised: bool = True,
+                  source: str = "given") -> PoissonGaussian:
+        """The model of a sensor of ``gain`` DN per electron and ``read_noise`` electrons
+        r.m.s.; ``quantised`` adds the 1/12 DN² of rounding to integer DN."""
+        g, r = _finite("gain", gain), _finite("read_noise", read_noise)
+        if g <= 0 or r < 0:
+            raise ValueError(f"gain must be > 0 and read_noise >= 0, got {gain!r}, {read_noise!r}")
+        return cls(a=g, b=(g * r) ** 2 + (1.0 / 12.0 if quantised else 0.0), source=source)
+
+    @classmethod
+    def from_metadata(cls, meta) -> PoissonGaussian | None:
+        """The model from a capture's metadata: a :class:`~metasensor.simulation.noise.NoiseModel`
+        (``Capture.noise``) or the ``"metasensor"`` extras of a written capture (keys ``gain``,
+        ``read_noise``; views in DN). None where they hold no gain (a noise-free simulation, or
+        data that do not say)."""
+        gain = getattr(meta, "gain", None) if not isinstance(meta, dict) else meta.get("gain")
+        read = (getattr(meta, "read_noise", None) if not isinstance(meta, dict)
+                else meta.get("read_noise"))
+        if gain is None or read is None:
+            return None
+        return cls.from_gain(float(gain), float(read), source="metadata")
+
+    @property
+    def shift(self) -> float:
+        """``b / a``: the shifted-Poisson offset (data units) of Richardson–Lucy."""
+        if self.a <= 0:
+            raise ValueError("the shifted-Poisson form needs a > 0 (signal-dependent noise)")
+        return self.b / self.a
+
+    def variance(self, y: torch.Tensor) -> torch.Tensor:
+        """``a·max(y, 0) + b`` (data units²) of samples ``y``."""
+        return torch.clamp(y, min=0.0) * self.a + self.b
+
+
+def sample_weights(model: PoissonGaussian, level: torch.Tensor, mask: torch.Tensor
+                   ) -> tuple[torch.Tensor | None, float]:
+    """Per-sample weights of weighted least squares (module docstring).
+
+    Parameters
+    ----------
+    model : PoissonGaussian
+        The noise model, data units.
+    level : torch.Tensor
+        ``(V, My, Mx)`` the samples' expected values (data units): the data, or better a
+        prediction of them (weights of the noisy data bias the fit towards dark samples).
+    mask : torch.Tensor
+        ``(My, Mx)`` bool, True on observed samples.
+
+    Returns
+    -------
+    weights : torch.Tensor or None
+        ``(V, My, Mx)`` float32, ``σ² / var``, mean 1 over observed samples and 0 elsewhere;
+        None where ``a = 0`` (every weight 1).
+    sigma2 : float
+        ``σ²`` (data units²), the harmonic mean of the observed samples' variances.
+    """
+    if model.a == 0:
+        return None, float(model.b)
+    mf = mask.to(level.dtype)
+    var = model.variance(level)
+    mean_var = float((var * mf).sum()) / max(float(mf.sum()) * var.shape[0], 1.0)
+    var = torch.clamp(var, min=VARIANCE_FLOOR * mean_var)
+    inv = mf / var
+    n_obs = max(float(mf.sum()) * var.shape[0], 1.0)
+    sigma2 = n_obs / max(float(inv.sum()), 1e-30)
+    return (inv * sigma2).to(torch.float32), sigma2
