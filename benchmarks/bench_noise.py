@@ -45,7 +45,8 @@ def _runs(true_model):
     return [("hqs", "global", {"solver": "hqs", "noise_model": "global"}),
             ("hqs", "metadata", {"solver": "hqs", "noise_model": true_model}),
             ("hqs", "fit", {"solver": "hqs", "noise_model": "fit"}),
-            ("rl", "global", {"solver": "rl", "iterations": RL_ITERATIONS}),
+            ("rl", "global", {"solver": "rl", "iterations": RL_ITERATIONS,
+                              "noise_model": "global"}),
             ("rl", "metadata", {"solver": "rl", "iterations": RL_ITERATIONS,
                                 "noise_model": true_model})]
 

@@ -183,5 +183,27 @@ def test_reconstruct_fit_falls_back_with_one_warning():
         fell = ms.reconstruct(cap.views, cfg, noise_model="fit", solver_options=opts).image
     msgs = [str(w.message) for w in caught if "noise fit failed" in str(w.message)]
     assert len(msgs) == 1 and "global" in msgs[0]
-    plain = ms.reconstruct(cap.views, cfg, solver_options=opts).image
+    with warnings.catch_warnings(record=True) as caught:  # "auto": quietly global here
+        warnings.simplefilter("always")
+        auto = ms.reconstruct(cap.views, cfg, solver_options=opts, noise_model="auto")
+    assert not [w for w in caught if "noise" in str(w.message)]
+    assert auto.noise_model is None
+    plain = ms.reconstruct(cap.views, cfg, solver_options=opts, noise_model="global").image
     np.testing.assert_array_equal(fell, plain)
+    np.testing.assert_array_equal(auto.image, plain)
+
+
+def test_reconstruct_auto_fits_the_model_for_hqs_only():
+    cfg = ms.SystemConfig()
+    cap = ms.simulate(load_scene("camera", 120), cfg, photons=625.0, read_noise=3.0, seed=0,
+                      comparison=False)
+    opts = HQSOptions(continuation=Continuation(beta_max=8.0))
+    assert ms.reconstruct(cap.views, cfg, solver_options=opts).noise_model is None  # default
+    rec = ms.reconstruct(cap.views, cfg, solver_options=opts, noise_model="auto")
+    assert rec.noise_model is not None and rec.noise_model.source == "fit"
+    assert abs(rec.noise_model.a / cap.noise.gain - 1) < 0.1
+    assert ms.reconstruct(cap.views, cfg, solver="rl", iterations=1,
+                          noise_model="auto").noise_model is None
+    given = PoissonGaussian.from_metadata(cap.noise)
+    assert ms.reconstruct(cap.views, cfg, solver="rl", iterations=1,
+                          noise_model=given).noise_model is given

@@ -66,6 +66,9 @@ class Reconstruction:
         block kept its starting bank; None: no DAO).
     dao_zernike : numpy.ndarray or None
         ``(by, bx, J)`` DAO's estimate per block, applied or not (waves; None: no DAO).
+    noise_model : PoissonGaussian or None
+        The views' noise model the solver used (:mod:`metasensor.solvers.noise_model`; None:
+        one global weight).
     """
 
     image: Any
@@ -84,6 +87,7 @@ class Reconstruction:
     views_used: int = 0
     dao_applied: list = field(default_factory=list)
     dao_zernike: np.ndarray | None = None
+    noise_model: Any = None
 
     def __repr__(self) -> str:  # the arrays by shape and dtype, not their values
         from metasensor.summary import short_repr
@@ -184,17 +188,24 @@ def _block_grid(blocks) -> tuple[int, int]:
         raise ValueError(f"blocks must be a pair (by, bx), got {blocks!r}") from None
 
 
-def _noise_model(views, opts: ReconOptions):
-    """The Poisson–Gaussian model ``opts.noise_model`` asks for (fitted here for ``"fit"``:
-    once, on the whole stack), or None for one global weight."""
+def _noise_model(views, opts: ReconOptions, solver: str):
+    """The Poisson–Gaussian model ``opts.noise_model`` asks for (fitted here for ``"fit"`` and
+    ``"auto"``: once, on the whole stack), or None for one global weight."""
     if not isinstance(opts.noise_model, str):
         return opts.noise_model
-    if opts.noise_model == "global":
+    if opts.noise_model == "global" or (opts.noise_model == "auto" and solver != "hqs"):
         return None
     import warnings
 
     from metasensor.solvers.noise_fit import fit_poisson_gaussian
 
+    if opts.noise_model == "auto":  # quietly global where the fit is refused or imprecise
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", UserWarning)
+            try:
+                return fit_poisson_gaussian(views).model
+            except (ValueError, UserWarning):
+                return None
     try:
         return fit_poisson_gaussian(views).model
     except ValueError as exc:
@@ -340,7 +351,8 @@ def reconstruct(views, cfg: SystemConfig, method: str = "isa", zernike=None, fie
     from metasensor.phasespace.views import subset_major, view_order
 
     uv = view_order(cfg.view_mask(opts.view_radius), opts.order)
-    solver_opts, subsets = _solver_options(opts, solver, len(uv), d, _noise_model(views, opts))
+    noise = _noise_model(views, opts, solver)
+    solver_opts, subsets = _solver_options(opts, solver, len(uv), d, noise)
     corners = None
     if opts.space_variant:
         from metasensor.recon.space_variant import corner_zernikes
@@ -348,7 +360,8 @@ def reconstruct(views, cfg: SystemConfig, method: str = "isa", zernike=None, fie
         corners = corner_zernikes(block_list, shape, zernike, field_zernike)
     return _run(views, cfg, method, grid, zern, opts, {
         "blocks": block_list, "uv": subset_major(uv, subsets), "solver": solver_opts,
-        "subsets": subsets, "shape": shape, "t0": t0, "name": solver, "corners": corners})
+        "subsets": subsets, "shape": shape, "t0": t0, "name": solver, "corners": corners,
+        "noise": getattr(solver_opts, "noise_model", None)})
 
 
 def _run(views, cfg, method, grid, zern, opts: ReconOptions, plan: dict) -> Reconstruction:
@@ -381,4 +394,5 @@ def _run(views, cfg, method, grid, zern, opts: ReconOptions, plan: dict) -> Reco
         subsets=plan["subsets"], seconds=time.perf_counter() - plan["t0"], solver=plan["name"],
         dao_history=collect.dao, registration=collect.registration,
         registration_zernike=collect.reg_zernike, views_used=len(plan["uv"]),
-        dao_applied=collect.applied, dao_zernike=collect.dao_zernike)
+        dao_applied=collect.applied, dao_zernike=collect.dao_zernike,
+        noise_model=plan["noise"])

@@ -21,6 +21,8 @@ from metasensor.recon.inputs import read_psf_file
 
 __all__ = ["register", "read_psf_file", "ReconstructArgs", "run_reconstruct"]
 
+NOISE_CHOICES = ("auto", "global", "fit", "stored")  # --noise
+
 _Path = Path | None
 
 
@@ -50,6 +52,12 @@ class ReconstructArgs:
         "--register/--no-register",
         help="register the views against the PSF bank first (for banks that may be off)")
     ] = False
+    noise: Annotated[str, typer.Option(
+        help="noise model of the data term: global (one weight for every sample) | auto (HQS: "
+        "Poisson-Gaussian weights fitted to the views where the fit is reliable, else one "
+        "weight) | fit (Poisson-Gaussian, fitted to the views; RL: shifted Poisson) | stored "
+        "(Poisson-Gaussian from the views' metadata: gain and read noise, as simulate writes "
+        "them)")] = "global"
     iterations: Annotated[int | None, typer.Option(help="Richardson-Lucy iterations")] = None
     subsets: Annotated[int | None, typer.Option(help="view subsets per iteration")] = None
     view_radius: Annotated[float | None, typer.Option(
@@ -88,6 +96,9 @@ class ReconstructArgs:
                              "would be ignored; give the aberration or the bank, not both")
         if self.system is not None and self.field_zernike is not None:
             raise ValueError("give either --system or --field-zernike, not both")
+        if self.noise not in NOISE_CHOICES:
+            raise ValueError(f"--noise must be one of {', '.join(NOISE_CHOICES)}, got "
+                             f"{self.noise!r}")
         from metasensor.recon.dao_choice import DAO_CHOICES
 
         if self.quality not in ("default", "fast"):
@@ -117,17 +128,30 @@ class ReconstructArgs:
                            "system": self.system, "field_zernike": self.field_zernike},
                           {"method": self.dao, "blocks": self.blocks, "quality": self.quality,
                            "overlap": self.overlap, "solver": self.solver,
+                           "noise": self.noise,
                            "iterations": self.iterations, "subsets": self.subsets,
                            "view_radius": self.view_radius, "zernike": self.zernike,
                            "config": cfg.to_dict()})
 
 
-def _recon_options(args: ReconstructArgs, bank, target):
+def _noise_model(args: ReconstructArgs, inputs):
+    """``--noise`` as a ReconOptions value: "auto", "global", "fit" or the stored model."""
+    if args.noise != "stored":
+        return args.noise
+    if inputs.noise is None:
+        raise ValueError(f"--noise stored: {args.views} holds no gain and read noise in its "
+                         "metadata; use --noise fit")
+    return inputs.noise
+
+
+def _recon_options(args: ReconstructArgs, inputs, target):
     """The reconstruction's settings from the command line."""
     from metasensor.recon.options import ReconOptions
 
+    bank = inputs.bank
     return ReconOptions(overlap=args.overlap, iterations=args.iterations, subsets=args.subsets,
                         solver=args.isa_solver, register=args.register_views,
+                        noise_model=_noise_model(args, inputs),
                         view_radius=args.view_radius, device=args.device, psf=bank,
                         scheduler=args.scheduler, num_workers=args.workers, out=target,
                         progress=True)
@@ -204,7 +228,7 @@ def run_reconstruct(args: ReconstructArgs) -> None:
         rec = reconstruct(stack, cfg, method=args.dao, zernike=parse_zernike(args.zernike),
                           field_zernike=inputs.field_zernike,
                           blocks=parse_pair(args.blocks, "--blocks"),
-                          options=_recon_options(args, inputs.bank, target))
+                          options=_recon_options(args, inputs, target))
     except BaseException:
         if staged is not None:
             staged.discard()

@@ -31,6 +31,9 @@ class ReconInputs:
         ``(by, bx, J)`` Noll vectors (waves) over the field.
     origin : list of float or None
         The views' stored sensor origin (row, col), realign's.
+    noise : PoissonGaussian or None
+        The views' Poisson–Gaussian noise from their stored metadata (``gain``, ``read_noise``:
+        what ``simulate`` writes), None where they do not say.
     """
 
     config: Any
@@ -39,6 +42,7 @@ class ReconInputs:
     bank_zernike: np.ndarray | None = None
     field_zernike: np.ndarray | None = None
     origin: list | None = None
+    noise: Any = None
 
 
 def read_psf_file(path: Path, with_attrs: bool = False):
@@ -142,6 +146,20 @@ def read_inputs(args) -> ReconInputs:
                          f"has nnum {cfg.nnum}")
     big = views.suffix.lower() != ".zarr" and views.stat().st_size > 2**29
     stack = read_views(views, nnum=cfg.nnum, mmap=big)  # zarr: lazy, read block by block
+    extras = stored_extras(views)
     return ReconInputs(config=cfg, stack=stack, bank=bank, bank_zernike=_bank_zernike(attrs),
                        field_zernike=_field_zernike(args.field_zernike, args.system),
-                       origin=_origin(stored_extras(views).get("origin"), views))
+                       origin=_origin(extras.get("origin"), views), noise=_stored_noise(extras))
+
+
+def _stored_noise(extras: dict):
+    """The Poisson–Gaussian model of views whose metadata hold their gain and read noise (in
+    DN, as ``simulate`` writes them), else None (unreadable values are ignored)."""
+    from metasensor.solvers.noise_model import PoissonGaussian
+
+    if extras.get("units", "DN") != "DN":
+        return None
+    try:
+        return PoissonGaussian.from_metadata(extras)
+    except (TypeError, ValueError):
+        return None

@@ -16,7 +16,7 @@ from metasensor.solvers.noise_model import PoissonGaussian
 __all__ = ["ReconOptions", "SOLVERS", "HQS_MAX_STEP", "NOISE_MODELS"]
 
 SOLVERS = ("rl", "hqs")
-NOISE_MODELS = ("global", "fit")
+NOISE_MODELS = ("global", "fit", "auto")
 HQS_MAX_STEP = 5  # HQS up to this scan step (pixels): a 1 x 1 scan would factor 225² systems
 
 
@@ -45,13 +45,15 @@ class ReconOptions:
         The HQS solver's settings (prior, ``lam_scale``, ``noise``, ...).
     noise_model : str or PoissonGaussian
         The views' noise (:mod:`metasensor.solvers.noise_model`): ``"global"`` (default: one
-        weight for every sample, the noise from ``solver_options.noise`` or the data), ``"fit"``
-        (a Poisson–Gaussian model fitted to the views once,
+        weight for every sample, the noise from ``solver_options.noise`` or the data), ``"fit"`` (a
+        Poisson–Gaussian model fitted to the views once,
         :func:`metasensor.solvers.noise_fit.fit_poisson_gaussian`; an unreliable fit warns once
-        and falls back to ``"global"``), or a :class:`PoissonGaussian` (e.g. from the capture's
-        metadata, ``PoissonGaussian.from_metadata(cap.noise)``). HQS weighs each sample by
-        ``1/var``; Richardson–Lucy takes the shifted-Poisson form. A model given in
-        ``solver_options`` wins.
+        and falls back to ``"global"``), a :class:`PoissonGaussian` (e.g. from the capture's
+        metadata, ``PoissonGaussian.from_metadata(cap.noise)``), or ``"auto"`` (the fitted
+        model for HQS where the fit is reliable, else silently ``"global"``; Richardson–Lucy
+        keeps plain Poisson). HQS weighs each sample by ``1/var``; Richardson–Lucy takes
+        the shifted-Poisson form. A model given in ``solver_options`` wins;
+        ``Reconstruction.noise_model`` is the model used (None: global).
     register : bool
         Register every block's views against its bank first
         (:mod:`metasensor.dao.bank_registration`; for banks that may be off). Default False.

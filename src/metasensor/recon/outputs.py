@@ -14,6 +14,13 @@ RESULT_FILES = ("image.tif", "image.zarr", "zernike.npy", "summary.json", "recon
 PREVIEW_PX = 2048  # longest side of the images drawn in reconstruction.png
 
 
+def _noise_summary(model) -> dict | None:
+    """The noise model used, for summary.json (None: one global weight)."""
+    if model is None:
+        return None
+    return {"a_dn_per_electron": model.a, "b_dn2": model.b, "source": model.source}
+
+
 def write_outputs(out: Path, rec, views, origin=None, provenance: dict | None = None
                   ) -> list[Path]:
     """image.tif (float32, config JSON in the description), zernike.npy, summary.json and a PNG.
@@ -42,7 +49,8 @@ def write_outputs(out: Path, rec, views, origin=None, provenance: dict | None = 
                "shape": list(image.shape), "history": rec.history,
                "registration_px": rec.registration,
                "registration_zernike": (None if rec.registration_zernike is None
-                                        else rec.registration_zernike.tolist())}
+                                        else rec.registration_zernike.tolist()),
+               "noise_model": _noise_summary(getattr(rec, "noise_model", None))}
     if rec.method in ("wave", "geometric"):  # DAO: the estimated wavefront of every block
         summary["zernike_per_block"] = np.asarray(rec.zernike).tolist()
         summary["dao_applied"] = rec.dao_applied  # False: negligible, the start's bank kept

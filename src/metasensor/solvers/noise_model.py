@@ -13,8 +13,10 @@ noise, bit depth as the simulator writes them) or is fitted to the views
 Weighted least squares (the HQS data term, :mod:`metasensor.solvers.hqs`) weighs a sample by
 ``1 / var``; :func:`sample_weights` returns those weights normalised to mean 1 over the observed
 samples, and the reference variance ``σ²`` they are relative to (the harmonic mean of the
-variances), so that ``σ²·W = 1 / var``. With ``a = 0`` every weight is exactly 1 and
-``σ² = b``: the unweighted data term. Richardson–Lucy takes the model as the shifted-Poisson
+variances), so that ``σ²·W = 1 / var``; a variance counts as at least :data:`VARIANCE_FLOOR`
+times the mean variance (the residual of dark samples is not their noise alone but also the
+model's error, which the model above does not hold). With ``a = 0`` every weight is exactly 1
+and ``σ² = b``: the unweighted data term. Richardson–Lucy takes the model as the shifted-Poisson
 form of Snyder, Hammoud & White (JOSA A 10, 1014–1023, 1993): ``y + b/a`` is nearly Poisson
 (in units of ``a``) with mean ``A x + b/a``.
 """
@@ -28,8 +30,10 @@ import torch
 
 __all__ = ["PoissonGaussian", "sample_weights", "VARIANCE_FLOOR"]
 
-#: smallest variance a weight uses, relative to the model's variance at the data's mean
-VARIANCE_FLOOR = 1e-3
+#: smallest variance a weight uses, relative to the mean variance of the observed samples: the
+#: residual of dark samples is not their noise alone (the model's own error), so a weight is at
+#: most 10x the mean-variance sample's (docs/decisions.md, 2026-11-26, bench_noise)
+VARIANCE_FLOOR = 0.1
 
 
 def _finite(name: str, value) -> float:
@@ -123,7 +127,7 @@ def sample_weights(model: PoissonGaussian, level: torch.Tensor, mask: torch.Tens
         ``(V, My, Mx)`` float32, ``σ² / var``, mean 1 over observed samples and 0 elsewhere;
         None where ``a = 0`` (every weight 1).
     sigma2 : float
-        ``σ²`` (data units²), the harmonic mean of the observed samples' variances.
+        ``σ²`` (data units²), the harmonic mean of the observed samples' variances (floored).
     """
     if model.a == 0:
         return None, float(model.b)
