@@ -108,3 +108,20 @@ def test_a_command_failing_inside_its_progress_bar_closes_it_before_the_error(tm
     assert "telescope:" in res.stderr  # the bar was shown
     lines = res.stderr.replace("\r", "\n").splitlines()
     assert "error: views hold NaN" in lines, res.stderr
+
+
+def test_import_sets_passive_openmp_waiting_unless_the_environment_says_otherwise():
+    import os
+    from pathlib import Path
+
+    src = str(Path(__file__).resolve().parents[1] / "src")
+    probe = "import os, metasensor; print(os.environ['OMP_WAIT_POLICY'])"
+    env = {k: v for k, v in os.environ.items() if k != "OMP_WAIT_POLICY"}
+    env["PYTHONPATH"] = src
+    for given, expected in ((None, "PASSIVE"), ("ACTIVE", "ACTIVE")):
+        if given:
+            env["OMP_WAIT_POLICY"] = given
+        out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True,
+                             env=env, timeout=60)
+        assert out.returncode == 0, out.stderr
+        assert out.stdout.strip() == expected

@@ -12,9 +12,9 @@ import importlib  # no other import here: a Ctrl-C while the command starts is c
 import os  # loaded with the interpreter already
 
 # OpenMP's threads (torch's intra-op pool) sleep at their barriers instead of spinning, unless
-# the environment says otherwise: next to another busy process, spinning partners cost a stream
-# block 6.8x the CPU time of one thread (docs/decisions.md, "the cost of the default
-# reconstruction of the whole sensor"). Read when torch loads, so set before it is imported.
+# the environment says otherwise: next to another busy process, spinning partners multiply the
+# CPU time (docs/decisions.md, "the cost of the default reconstruction of the whole sensor").
+# Read when torch loads, so set before it is imported.
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 __version__ = "0.1.0"
