@@ -307,19 +307,8 @@ def estimate_depth(views, cfg: SystemConfig, calibration=None, *, candidates: in
         centre = int(np.nonzero((uu == c) & (vv == c))[0][0])
         guide = stack[centre].clone()
         gf = GuidedFilter(guide, radius=radius, eps=eps)
-        given = None if disparity_range is None else (float(disparity_range[0]),
-                                                      float(disparity_range[1]))
-        found = measure_span(stack, au, av, centre, geometry.default_disparity_range(cfg),
-                             occlusion=occlusion, given=given)
-        if given is None:
-            span, limit = found.span, found.searched
-            if found.saturated > COARSE_SATURATED:
-                warnings.warn(f"{100 * found.saturated:.1f} % of the coarse estimates "
-                              f"saturate an end of the widest search {limit[0]:+.2f} .. "
-                              f"{limit[1]:+.2f} view px per view step: larger disparities are "
-                              "not found", RuntimeWarning, stacklevel=2)
-        else:
-            span, limit = given, None
+        span, limit, found = _initial_span(stack, au, av, centre, cfg, occlusion,
+                                           disparity_range)
         weight = CENTRE_WEIGHT / cfg.scan**2 if cost == "variance" else 0.0
         while True:
             cands = _candidates(span, candidates, amax)
@@ -334,26 +323,33 @@ def estimate_depth(views, cfg: SystemConfig, calibration=None, *, candidates: in
                 break
             span = wider
         if limit is None:  # a given span: the coarse search says whether it holds the scene
-            sat = tuple(max(a, b) for a, b in zip(sat, found.beyond, strict=True))
-            if max(sat) > SATURATED:
-                warnings.warn(f"{100 * sat[0]:.1f} % / {100 * sat[1]:.1f} % of the scene lies "
-                              f"below / above disparity_range {span} (coarse wide search): "
-                              "widen it (or leave it to the default, measured)",
-                              RuntimeWarning, stacklevel=2)
+            sat = _check_given_span(span, sat, found.beyond)
         ends = (idx == 0) | (idx == len(cands) - 1)
         if refine_iterations > 0:
             gfr = gf if refine_radius is None else GuidedFilter(guide, radius=refine_radius,
                                                                  eps=eps)
-            disp = gauss_newton_refine(stack, au, av, disp, gfr, iterations=refine_iterations,
-                                       max_change=float(cands[1] - cands[0]),
-                                       occlusion=occlusion)
-            disp = torch.clamp(disp, float(cands[0]), float(cands[-1]))
+            disp = _refined(stack, au, av, disp, gfr, cands, refine_iterations, occlusion)
         if fill:
             disp = fill_low_confidence(disp, conf, guide, radius=fill_radius,
                                        threshold=fill_threshold, eps=eps)
         valid = to_numpy((conf >= fill_threshold) & ~ends).astype(bool)
         disparity = to_numpy(disp).astype(np.float32)
         confidence = to_numpy(conf).astype(np.float32)
+    return _result(disparity, confidence, valid, cands, cfg, lens,
+                   "given" if limit is None else "measured", sat)
+
+
+def _refined(stack, au, av, disp, gf, cands, iterations, occlusion):
+    """Gauss–Newton refinement of the sweep's disparities, each step at most one candidate
+    step, clamped to the swept span."""
+    disp = gauss_newton_refine(stack, au, av, disp, gf, iterations=iterations,
+                               max_change=float(cands[1] - cands[0]), occlusion=occlusion)
+    return torch.clamp(disp, float(cands[0]), float(cands[-1]))
+
+
+def _result(disparity, confidence, valid, cands, cfg, lens, span_source, sat) -> DepthResult:
+    """The :class:`DepthResult` of the disparities: image-side depth, and the object distance
+    where the main lens's geometry is known."""
     z = geometry.disparity_to_image_depth(disparity, cfg).astype(np.float32)
     obj = None
     if lens is not None:
@@ -361,6 +357,35 @@ def estimate_depth(views, cfg: SystemConfig, calibration=None, *, candidates: in
     return DepthResult(
         disparity=disparity, confidence=confidence, image_depth=z, object_distance=obj,
         depth=obj, depth_kind="object" if obj is not None else "image",
-        candidates=cands, config=cfg, valid=valid,
-        span_source="given" if limit is None else "measured", saturated=sat,
+        candidates=cands, config=cfg, valid=valid, span_source=span_source, saturated=sat,
     )
+
+
+def _initial_span(stack, au, av, centre, cfg, occlusion, disparity_range):
+    """(span, widest searched span or None for a given one, the coarse search's result) for
+    :func:`estimate_depth`; warns once when the coarse estimates saturate the widest search."""
+    given = None if disparity_range is None else (float(disparity_range[0]),
+                                                  float(disparity_range[1]))
+    found = measure_span(stack, au, av, centre, geometry.default_disparity_range(cfg),
+                         occlusion=occlusion, given=given)
+    if given is not None:
+        return given, None, found
+    limit = found.searched
+    if found.saturated > COARSE_SATURATED:
+        warnings.warn(f"{100 * found.saturated:.1f} % of the coarse estimates saturate an end "
+                      f"of the widest search {limit[0]:+.2f} .. {limit[1]:+.2f} view px per "
+                      "view step: larger disparities are not found", RuntimeWarning,
+                      stacklevel=3)
+    return found.span, limit, found
+
+
+def _check_given_span(span, sat, beyond) -> tuple[float, float]:
+    """The saturated shares below / above a given span (the sweep's, or the coarse wide
+    search's where larger); warns once when either exceeds ``SATURATED``."""
+    sat = tuple(max(a, b) for a, b in zip(sat, beyond, strict=True))
+    if max(sat) > SATURATED:
+        warnings.warn(f"{100 * sat[0]:.1f} % / {100 * sat[1]:.1f} % of the scene lies "
+                      f"below / above disparity_range {span} (coarse wide search): "
+                      "widen it (or leave it to the default, measured)",
+                      RuntimeWarning, stacklevel=3)
+    return sat
