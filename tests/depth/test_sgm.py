@@ -22,16 +22,16 @@ def _reference(cost: np.ndarray, p1: float, p2: float, paths: int) -> np.ndarray
     k, h, w = cost.shape
     total = np.zeros_like(cost)
     for dy, dx in STEPS[paths]:
-        paths = np.zeros_like(cost)
+        path = np.zeros_like(cost)
         ys = range(h) if dy >= 0 else range(h - 1, -1, -1)
         for y in ys:
             xs = range(w) if dx >= 0 else range(w - 1, -1, -1)
             for x in xs:
                 py, px = y - dy, x - dx
                 if not (0 <= py < h and 0 <= px < w):
-                    paths[:, y, x] = cost[:, y, x]
+                    path[:, y, x] = cost[:, y, x]
                     continue
-                prev = paths[:, py, px]
+                prev = path[:, py, px]
                 low = prev.min()
                 for d in range(k):
                     cands = [prev[d], low + p2]
@@ -39,8 +39,8 @@ def _reference(cost: np.ndarray, p1: float, p2: float, paths: int) -> np.ndarray
                         cands.append(prev[d - 1] + p1)
                     if d < k - 1:
                         cands.append(prev[d + 1] + p1)
-                    paths[d, y, x] = cost[d, y, x] + min(cands) - low
-        total += paths
+                    path[d, y, x] = cost[d, y, x] + min(cands) - low
+        total += path
     return total
 
 

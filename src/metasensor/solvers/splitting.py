@@ -111,7 +111,6 @@ def half_quadratic_splitting(x: torch.Tensor, aty: torch.Tensor, xstep: XStep, p
     if inner < 1:
         raise ValueError(f"inner must be >= 1, got {inner}")
     transform = prior.transform
-    solve = None
     for beta in betas:
         mu = beta / lam
         solve = None  # the previous β's factorisation goes before the next one is made
