@@ -63,8 +63,8 @@ def test_blending_is_exact_on_integer_tiles_and_writes_a_pyramid(tmp_path):
     pos = {k: tuple(float(v) for v in layout.origin(k)) for k in layout.indices}
     out = blend_tiles(paths, pos, layout.shape, tmp_path / "m.zarr", ramp=16, chunk=64)
     level0 = open_mosaic(out)[:]
-    # the outermost ring of the mosaic has weight 0 in every tile (ramp starts at 0)
-    assert np.allclose(level0[1:-1, 1:-1], big[1:-1, 1:-1], rtol=0, atol=1e-4)
+    # every pixel, the mosaic's outermost ring included, is covered and exact
+    assert np.allclose(level0, big, rtol=0, atol=1e-4)
     meta = zarr.open_group(str(out), mode="r").attrs["multiscales"][0]
     assert [d["path"] for d in meta["datasets"]] == ["0", "1", "2"]
     level1 = open_mosaic(out, 1)[:]
@@ -98,6 +98,34 @@ def test_subpixel_blend_of_registered_tiles_has_no_seam(tmp_path):
     xs = [int(round(pos[(0, 1)][1])) - c, 128 - c]
     assert seam_ratio(img, ys, xs) <= seam_ratio(truth, ys, xs) + 0.05
     assert np.abs(img - truth).max() < 0.05 * np.abs(truth).max()
+
+
+def test_blending_on_the_covered_rectangle_leaves_no_empty_rim(tmp_path):
+    layout = MosaicLayout((128, 128), (2, 2), overlap=32)
+    big = _texture((260, 260))
+    tiles, true = _cut(big, layout, jitter=1.5, seed=3)
+    pos = solve_positions(register_tiles(tiles, layout), layout)
+    # nominal canvas: a tile that moved inwards leaves mosaic pixels no tile reaches
+    full = open_mosaic(blend_tiles(_store(tiles, tmp_path), pos, layout.shape,
+                                   tmp_path / "full.zarr", ramp=24, chunk=64))[:]
+    y0, x0, y1, x1 = layout.covered(pos)
+    assert (y0, x0) == (max(int(np.ceil(pos[(0, j)][0] - 1e-6)) for j in range(2)),
+                        max(int(np.ceil(pos[(i, 0)][1] - 1e-6)) for i in range(2)))
+    assert y1 <= min(true[(1, j)][0] for j in range(2)) + 128 + 0.1
+    assert x1 <= min(true[(i, 1)][1] for i in range(2)) + 128 + 0.1
+    placed = {k: (v[0] - y0, v[1] - x0) for k, v in pos.items()}
+    img = open_mosaic(blend_tiles(_store(tiles, tmp_path), placed, (y1 - y0, x1 - x0),
+                                  tmp_path / "box.zarr", ramp=24, chunk=64))[:]
+    assert img.shape == (y1 - y0, x1 - x0)
+    truth = big[y0:y1, x0:x1]
+    # (the tiles' first two rows or columns sampled outside `big` where they moved to < 0)
+    assert np.abs(img - truth)[2:, 2:].max() < 0.05 * np.abs(truth).max()
+    rim = np.concatenate([img[0], img[-1], img[:, 0], img[:, -1]])
+    assert np.all(rim != 0)  # every rim pixel has a tile's data
+    assert np.allclose(img, full[y0:y1, x0:x1], atol=1e-5)
+    assert (np.abs(full) < 1e-9).sum() > 0  # the nominal canvas did have an empty rim
+    with pytest.raises(ValueError, match="lack tile"):
+        layout.covered({(0, 0): (0.0, 0.0)})
 
 
 @pytest.mark.slow

@@ -5,9 +5,12 @@ are read from their Zarr arrays (only the window the chunk needs plus ``MARGIN``
 resampled onto the mosaic grid at their sub-pixel positions (cubic splines,
 ``scipy.ndimage.shift``; the margin makes the spline prefilter of a window equal that of the
 whole tile to ~1e-7), weighted by a feathering ramp that rises linearly over ``ramp`` pixels
-from every tile border (zero on the outermost pixel), and normalised by the sum of the weights:
-identical tiles blend to themselves exactly, and the weights sum to one everywhere a tile
-covers. Memory is bounded by a few chunks per worker, whatever the mosaic's size.
+from every tile border (``1 / (ramp + 1)`` on the outermost sample, zero outside the tile), and
+normalised by the sum of the weights: identical tiles blend to themselves exactly, every mosaic
+pixel inside a tile's samples is covered (the mosaic's own outermost pixels included), and
+pixels that no tile reaches are 0 (:meth:`~metasensor.mosaic.layout.MosaicLayout.covered` gives
+the rectangle that every registered layout covers). Memory is bounded by a few chunks per
+worker, whatever the mosaic's size.
 
 The pyramid halves the resolution per level by 2 × 2 means (``dask.array.coarsen``), each level
 read back from the one written before. The store is OME-NGFF 0.4 (Zarr v2 format, axes y, x in
@@ -35,13 +38,17 @@ MARGIN = 16
 
 
 def _ramp(t: np.ndarray, n: int, ramp: int) -> np.ndarray:
-    """Feathering weight at (fractional) tile coordinates ``t`` of a side of ``n`` pixels."""
-    return np.clip(np.minimum(t, n - 1 - t) / max(ramp, 1), 0.0, 1.0)
+    """Feathering weight at (fractional) tile coordinates ``t`` of a side of ``n`` pixels: 0
+    outside the samples ``[0, n - 1]``, ``(k + 1) / (ramp + 1)`` at distance ``k`` inside,
+    at most 1."""
+    k = np.minimum(t, n - 1 - t)
+    return np.where(k >= -1e-6, np.clip((k + 1.0) / (max(ramp, 1) + 1.0), 0.0, 1.0), 0.0)
 
 
 def feather(shape: tuple[int, int], ramp: int) -> np.ndarray:
     """(h, w) float64 weights: a separable linear ramp over ``ramp`` pixels from each border
-    (pixel k from the border weighs ``min(k / ramp, 1)``; the outermost pixel weighs 0)."""
+    (pixel k from the border weighs ``min((k + 1) / (ramp + 1), 1)``, so the outermost pixel
+    has a small weight and a tile alone covers its whole extent)."""
     h, w = shape
     return np.outer(_ramp(np.arange(h, dtype=float), h, ramp),
                     _ramp(np.arange(w, dtype=float), w, ramp))

@@ -70,6 +70,24 @@ class MosaicLayout:
                 pairs.append(((i, j), (i + 1, j)))
         return pairs
 
+    def covered(self, positions: dict) -> tuple[int, int, int, int]:
+        """The largest pixel rectangle ``(y0, x0, y1, x1)`` (end exclusive) inside the samples of
+        the outer tiles at their (registered, sub-pixel) ``positions`` (index -> (y, x) of the
+        tile's pixel (0, 0)): where tiles moved inwards the nominal mosaic's rim has no data.
+        The interior is covered when neighbours overlap, which the layout's overlap ensures for
+        position errors below a quarter of it."""
+        (gy, gx), (th, tw) = self.grid, self.tile_shape
+        for k in self.indices:
+            if k not in positions:
+                raise ValueError(f"positions lack tile {k}")
+        y0 = max(int(np.ceil(positions[(0, j)][0] - 1e-6)) for j in range(gx))
+        x0 = max(int(np.ceil(positions[(i, 0)][1] - 1e-6)) for i in range(gy))
+        y1 = min(int(np.floor(positions[(gy - 1, j)][0] + th - 1 + 1e-6)) + 1 for j in range(gx))
+        x1 = min(int(np.floor(positions[(i, gx - 1)][1] + tw - 1 + 1e-6)) + 1 for i in range(gy))
+        if y1 <= y0 or x1 <= x0:
+            raise ValueError(f"the tiles at {positions} cover no common rectangle")
+        return y0, x0, y1, x1
+
     def tile_field_zernike(self, fz_lens, index: tuple[int, int],
                            tile_shape: tuple[int, int] | None = None,
                            offset: float | tuple[float, float] = 0.0):

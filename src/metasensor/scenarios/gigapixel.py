@@ -84,12 +84,64 @@ def _write_tile(path: Path, image: np.ndarray) -> str:
     return str(path)
 
 
+def _capture_tiles(out: Path, s: GigapixelSettings, layout, lens, cfg, big, margin, steps):
+    """Simulate, realign and reconstruct every tile; write the meta-imaging and 2D tiles.
+
+    Returns (true positions, meta tile paths, 2D tile paths, the photon scale)."""
+    import metasensor as ms
+
+    o = cfg.field_offset_px
+    fz_lens = lens.field_zernike(cfg, (s.field_px, s.field_px))
+    rng = np.random.default_rng(s.seed)
+    true_pos, meta_paths, s2d_paths, scale = {}, {}, {}, None
+    for k in layout.indices:
+        oy, ox = layout.origin(k)
+        err = (0.0, 0.0) if k == (0, 0) else tuple(rng.uniform(-s.jitter, s.jitter, 2))
+        true_pos[k] = (oy + err[0], ox + err[1])
+        # the sensor's pixel (0, 0) sits o pixels before the tile image's (0, 0)
+        scene = _sample(big, (margin + true_pos[k][0] - o, margin + true_pos[k][1] - o),
+                        (s.tile, s.tile))
+        fz_sim = layout.tile_field_zernike(fz_lens, k, (s.tile, s.tile),
+                                           offset=(err[0] - o, err[1] - o))
+        cap = ms.simulate(scene, cfg, field_zernike=fz_sim, snr_db=s.snr_db,
+                          seed=s.seed + 1 + layout.indices.index(k), field_blocks=s.blocks,
+                          scale=scale)
+        scale = cap.scale
+        views = ms.realign(cap.frames, cap.config, cap.scan_order)
+        rec = ms.reconstruct(views, cap.config, blocks=s.blocks, iterations=s.iterations,
+                             field_zernike=layout.tile_field_zernike(fz_lens, k),
+                             space_variant=s.space_variant and s.iterations is None)
+        meta_paths[k] = _write_tile(out / "tiles" / f"meta_{k[0]}_{k[1]}.zarr",
+                                    np.asarray(rec.image))
+        s2d_paths[k] = _write_tile(out / "tiles" / f"sensor2d_{k[0]}_{k[1]}.zarr", cap.sensor2d)
+        steps.update()
+    return true_pos, meta_paths, s2d_paths, scale
+
+
+def _rows(truth, images, pos, grid, jitter, box):
+    """PSNR and seam statistics of each mosaic against the truth (a rim of ``jitter`` + 2 px
+    left out); ``box``: the covered rectangle the mosaics were blended on."""
+    from metasensor.metrics import psnr
+    from metasensor.mosaic.seams import seam_ratio
+
+    c = int(np.ceil(jitter)) + 2
+    crop = (slice(c, -c), slice(c, -c))
+    rngd = float(truth.max() - truth.min())
+    ys = [int(round(pos[(i, 0)][0])) - box[0] - c for i in range(1, grid[0])]
+    xs = [int(round(pos[(0, j)][1])) - box[1] - c for j in range(1, grid[1])]
+    return [{"sensor": name, "psnr_db": psnr(truth=truth[crop], image=img[crop], data_range=rngd),
+             "seam_ratio": seam_ratio(img[crop], ys, xs),
+             "truth_seam_ratio": seam_ratio(truth[crop], ys, xs)} for name, img in images]
+
+
 def run_gigapixel(out: str | Path, settings: GigapixelSettings | None = None,
                   progress: bool = True) -> dict:
-    """Run the scenario and write its report into ``out``; returns the summary."""
+    """Run the scenario and write its report into ``out``; returns the summary.
+
+    The mosaics are blended on the rectangle that the registered tiles cover
+    (:meth:`~metasensor.mosaic.layout.MosaicLayout.covered`), so no uncovered rim shows."""
     import metasensor as ms
     from metasensor.io.figures import save_panel
-    from metasensor.metrics import psnr
     from metasensor.mosaic import (
         MosaicLayout,
         blend_tiles,
@@ -97,7 +149,6 @@ def run_gigapixel(out: str | Path, settings: GigapixelSettings | None = None,
         register_tiles,
         solve_positions,
     )
-    from metasensor.mosaic.seams import seam_ratio
     from metasensor.scenarios.report import scenario_run
     from metasensor.sensor.realign import lenslet_counts
     from metasensor.simulation.lens import SingleLens
@@ -106,65 +157,35 @@ def run_gigapixel(out: str | Path, settings: GigapixelSettings | None = None,
     lens = SingleLens()
     cfg = lens.config(ms.SystemConfig())
     ly, lx = lenslet_counts((s.tile, s.tile), cfg)
-    o = cfg.field_offset_px
     layout = MosaicLayout((ly * cfg.nnum, lx * cfg.nnum), s.grid, s.overlap)
     with scenario_run(out, "gigapixel", len(layout.indices) + 2, progress) as run:
         out, steps = run.out, run.steps
         (out / "tiles").mkdir(exist_ok=True)
-        fz_lens = lens.field_zernike(cfg, (s.field_px, s.field_px))
-        margin = o + int(np.ceil(s.jitter)) + 4
+        margin = cfg.field_offset_px + int(np.ceil(s.jitter)) + 4
         big = _scene(s.scene, (layout.shape[0] + 2 * margin + s.tile,
                                layout.shape[1] + 2 * margin + s.tile))
-        rng = np.random.default_rng(s.seed)
-        true_pos, meta_paths, s2d_paths, scale = {}, {}, {}, None
-        for k in layout.indices:
-            oy, ox = layout.origin(k)
-            err = (0.0, 0.0) if k == (0, 0) else tuple(rng.uniform(-s.jitter, s.jitter, 2))
-            true_pos[k] = (oy + err[0], ox + err[1])
-            # the sensor's pixel (0, 0) sits o pixels before the tile image's (0, 0)
-            scene = _sample(big, (margin + true_pos[k][0] - o, margin + true_pos[k][1] - o),
-                            (s.tile, s.tile))
-            fz_sim = layout.tile_field_zernike(fz_lens, k, (s.tile, s.tile),
-                                               offset=(err[0] - o, err[1] - o))
-            cap = ms.simulate(scene, cfg, field_zernike=fz_sim, snr_db=s.snr_db,
-                              seed=s.seed + 1 + layout.indices.index(k), field_blocks=s.blocks,
-                              scale=scale)
-            scale = cap.scale
-            views = ms.realign(cap.frames, cap.config, cap.scan_order)
-            rec = ms.reconstruct(views, cap.config, blocks=s.blocks, iterations=s.iterations,
-                                 field_zernike=layout.tile_field_zernike(fz_lens, k),
-                                 space_variant=s.space_variant and s.iterations is None)
-            meta_paths[k] = _write_tile(out / "tiles" / f"meta_{k[0]}_{k[1]}.zarr",
-                                        np.asarray(rec.image))
-            s2d_paths[k] = _write_tile(out / "tiles" / f"sensor2d_{k[0]}_{k[1]}.zarr", cap.sensor2d)
-            steps.update()
+        true_pos, meta_paths, s2d_paths, scale = _capture_tiles(out, s, layout, lens, cfg, big,
+                                                                margin, steps)
         tiles = {k: open_mosaic_array(p) for k, p in meta_paths.items()}
         pairs = register_tiles(tiles, layout)
         pos = solve_positions(pairs, layout)
         reg_err = max(float(np.hypot(pos[k][0] - true_pos[k][0], pos[k][1] - true_pos[k][1]))
                       for k in layout.indices)
+        box = layout.covered(pos)
+        shape = (box[2] - box[0], box[3] - box[1])
+        placed = {k: (v[0] - box[0], v[1] - box[1]) for k, v in pos.items()}
         t_blend = time.perf_counter()
-        meta = blend_tiles(meta_paths, pos, layout.shape, out / "mosaic.ome.zarr", chunk=s.chunk,
-                           ramp=s.overlap // 2, pixel_size_um=cfg.pixel_pitch * 1e6,
-                           scheduler=s.scheduler)
-        s2d = blend_tiles(s2d_paths, pos, layout.shape, out / "mosaic_2d.ome.zarr",
-                          chunk=s.chunk, ramp=s.overlap // 2, pixel_size_um=cfg.pixel_pitch * 1e6,
-                          scheduler=s.scheduler)
+        mosaics = [blend_tiles(paths, placed, shape, out / name, chunk=s.chunk,
+                               ramp=s.overlap // 2, pixel_size_um=cfg.pixel_pitch * 1e6,
+                               scheduler=s.scheduler)
+                   for paths, name in ((meta_paths, "mosaic.ome.zarr"),
+                                       (s2d_paths, "mosaic_2d.ome.zarr"))]
         t_blend = time.perf_counter() - t_blend
         steps.update()
-        img_meta, img_2d = open_mosaic(meta)[:], open_mosaic(s2d)[:]
-        truth = (_sample(big, (margin, margin), layout.shape) * np.float32(scale))
-        c = int(np.ceil(s.jitter)) + 2  # the mosaic's own rim, uncovered where tiles moved inwards
-        crop = (slice(c, -c), slice(c, -c))
-        rngd = float(truth.max() - truth.min())
-        ys = [int(round(pos[(i, 0)][0])) - c for i in range(1, s.grid[0])]
-        xs = [int(round(pos[(0, j)][1])) - c for j in range(1, s.grid[1])]
-        rows = []
-        for name, img in (("2D sensor", img_2d), ("meta-imaging", img_meta)):
-            rows.append({"sensor": name, "psnr_db": psnr(truth=truth[crop], image=img[crop],
-                                                    data_range=rngd),
-                         "seam_ratio": seam_ratio(img[crop], ys, xs),
-                         "truth_seam_ratio": seam_ratio(truth[crop], ys, xs)})
+        img_meta, img_2d = (open_mosaic(m)[:] for m in mosaics)
+        truth = _sample(big, (margin + box[0], margin + box[1]), shape) * np.float32(scale)
+        rows = _rows(truth, (("2D sensor", img_2d), ("meta-imaging", img_meta)), pos, s.grid,
+                     s.jitter, box)
         lo, hi = float(truth.min()), float(truth.max())
         figs = {"mosaic": save_panel(out / "mosaic.png", [
             ("ground truth", truth), ("2D sensor", np.clip(img_2d, lo, hi)),
@@ -176,7 +197,7 @@ def run_gigapixel(out: str | Path, settings: GigapixelSettings | None = None,
             "pairs": [{"a": p.a, "b": p.b, "offset": p.offset, "error": p.error} for p in pairs],
             "positions_true": {f"{k[0]},{k[1]}": v for k, v in true_pos.items()},
             "positions_found": {f"{k[0]},{k[1]}": v for k, v in pos.items()},
-            "mosaic_shape": layout.shape, "blend_seconds": t_blend,
+            "mosaic_shape": shape, "mosaic_origin": box[:2], "blend_seconds": t_blend,
             "settings": {"tile": s.tile, "grid": s.grid, "overlap": s.overlap, "jitter": s.jitter,
                          "blocks": s.blocks, "snr_db": s.snr_db, "seed": s.seed,
                          "space_variant": s.space_variant and s.iterations is None},
