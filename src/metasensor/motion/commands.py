@@ -38,6 +38,34 @@ def _figure(before, after, path: Path) -> Path:
     return save_figure(fig, path)
 
 
+def _flow_view(text: str, nu: int, nv: int):
+    """``--flow-view`` → None (centre), "sharpest" or a (u, v) view index, checked."""
+    if text in ("centre", "center"):
+        return None
+    if text == "sharpest":
+        return "sharpest"
+    try:
+        u, v = (int(a) for a in text.split(","))
+    except ValueError:
+        raise ValueError(f"--flow-view must be centre, sharpest or u,v; got {text!r}") from None
+    if not (0 <= u < nu and 0 <= v < nv):
+        raise ValueError(f"--flow-view {text} is outside the {nu}² views")
+    return u, v
+
+
+def _scan_order(text: str | None, stored: dict, period: int, views: Path):
+    """The scan order: ``--scan-order`` if given, else the one stored with the views, else
+    row-major."""
+    if text is None and isinstance(stored.get("scan_order"), list):
+        from metasensor.sensor.scan import check_scan_order, period_of
+
+        order = [tuple(q) for q in stored["scan_order"]]
+        order = check_scan_order(order, period or period_of(order))
+        typer.echo(f"using the scan order stored in {Path(views).name}")
+        return order
+    return parse_scan_order(text or "row-major", period)
+
+
 def register(app: typer.Typer) -> None:
     """Add this stage's commands to app."""
 
@@ -86,27 +114,8 @@ def register(app: typer.Typer) -> None:
             raise ValueError(f"--period {period} differs from the stack's scan period {cfg.scan}")
         p = period or (cfg.scan if cfg is not None else 0)
         stored = stored_extras(views) if Path(views).exists() else {}
-        if scan_order is None and isinstance(stored.get("scan_order"), list):
-            from metasensor.sensor.scan import check_scan_order, period_of
-
-            order = [tuple(q) for q in stored["scan_order"]]
-            order = check_scan_order(order, p or period_of(order))
-            typer.echo(f"using the scan order stored in {Path(views).name}")
-        else:
-            order = parse_scan_order(scan_order or "row-major", p)
-        if flow_view in ("centre", "center"):
-            fv = None
-        elif flow_view == "sharpest":
-            fv = "sharpest"
-        else:
-            try:
-                u, v = (int(a) for a in flow_view.split(","))
-            except ValueError:
-                raise ValueError(f"--flow-view must be centre, sharpest or u,v; got {flow_view!r}"
-                                 ) from None
-            if not (0 <= u < stack.shape[0] and 0 <= v < stack.shape[1]):
-                raise ValueError(f"--flow-view {flow_view} is outside the {stack.shape[0]}² views")
-            fv = (u, v)
+        order = _scan_order(scan_order, stored, p, views)
+        fv = _flow_view(flow_view, stack.shape[0], stack.shape[1])
         if reference < -1:
             raise ValueError(f"--reference must be a scan-order index >= 0, or -1 for the "
                              f"middle one, got {reference}")
