@@ -234,6 +234,41 @@ def _figures(out: Path, s: TelescopeSettings, truth, images: dict, kymos: dict, 
                                      f"(true {s.obstruction})")}
 
 
+def _reconstructions(corrected, cfg_est, s: TelescopeSettings) -> dict:
+    """The meta-imaging images without and with DAO (and with the check solver, if set)."""
+    import metasensor as ms
+
+    recs = {}
+    for tag, it in (("", s.iterations), (f" (RL {s.check_iterations})", s.check_iterations)):
+        if tag and it is None:
+            continue
+        recs[f"meta-imaging, no DAO{tag}"] = ms.reconstruct(corrected, cfg_est,
+                                                             blocks=s.blocks, iterations=it)
+        recs[f"meta-imaging + DAO{tag}"] = ms.reconstruct(
+            corrected, cfg_est, method="wave", blocks=s.blocks, iterations=it)
+    return recs
+
+
+def _kymographs(caps, static, cfg, s: TelescopeSettings, ring) -> dict:
+    """Kymographs of the static reference, and of the turbulent sequence without and with
+    motion correction."""
+    frames, order = np.concatenate([c.frames for c in caps]), caps[0].scan_order
+    return {"static reference": _kymograph(np.concatenate([static.frames] * s.periods), cfg,
+                                           order, s.stride, False, ring),
+            "no motion correction": _kymograph(frames, cfg, order, s.stride, False, ring),
+            "motion-corrected": _kymograph(frames, cfg, order, s.stride, True, ring)}
+
+
+def _check_solver(db: dict, iterations: int | None) -> dict | None:
+    """The DAO gains measured again with the check solver (Richardson–Lucy ``iterations``)."""
+    if iterations is None:
+        return None
+    tag = f" (RL {iterations})"
+    return {"iterations": iterations,
+            "dao_gain_db": db[f"meta-imaging + DAO{tag}"] - db[f"meta-imaging, no DAO{tag}"],
+            "dao_over_2d_db": db[f"meta-imaging + DAO{tag}"] - db["2D sensor"]}
+
+
 def run_telescope(out: str | Path, settings: TelescopeSettings | None = None,
                   progress: bool = True) -> dict:
     """Run the scenario and write its report into ``out``; returns the summary."""
@@ -263,24 +298,11 @@ def run_telescope(out: str | Path, settings: TelescopeSettings | None = None,
         cfg_est = cfg.replace(obstruction=round(est.obstruction, 3))
         clock.lap("motion_and_pupil")
         steps.update()
-        recs = {}
-        for tag, it in (("", s.iterations), (f" (RL {s.check_iterations})", s.check_iterations)):
-            if tag and it is None:
-                continue
-            recs[f"meta-imaging, no DAO{tag}"] = ms.reconstruct(corrected, cfg_est,
-                                                                 blocks=s.blocks, iterations=it)
-            recs[f"meta-imaging + DAO{tag}"] = ms.reconstruct(
-                corrected, cfg_est, method="wave", blocks=s.blocks, iterations=it)
+        recs = _reconstructions(corrected, cfg_est, s)
         dao = recs["meta-imaging + DAO"]
         clock.lap("reconstruct")
         steps.update()
-        frames, ring = np.concatenate([c.frames for c in caps]), est.amplitude > 0
-        kymos = {"static reference": _kymograph(np.concatenate([static.frames] * s.periods), cfg,
-                                                cap.scan_order, s.stride, False, ring),
-                 "no motion correction": _kymograph(frames, cfg, cap.scan_order, s.stride,
-                                                    False, ring),
-                 "motion-corrected": _kymograph(frames, cfg, cap.scan_order, s.stride, True,
-                                                ring)}
+        kymos = _kymographs(caps, static, cfg, s, est.amplitude > 0)
         clock.lap("kymographs")
         steps.update()
         truth = cap.truth
@@ -296,12 +318,7 @@ def run_telescope(out: str | Path, settings: TelescopeSettings | None = None,
             "scenario": "telescope", "table": rows,
             "dao_gain_db": db["meta-imaging + DAO"] - db["meta-imaging, no DAO"],
             "dao_over_2d_db": db["meta-imaging + DAO"] - db["2D sensor"],
-            "check_solver": None if s.check_iterations is None else {
-                "iterations": s.check_iterations,
-                "dao_gain_db": db[f"meta-imaging + DAO (RL {s.check_iterations})"]
-                - db[f"meta-imaging, no DAO (RL {s.check_iterations})"],
-                "dao_over_2d_db": db[f"meta-imaging + DAO (RL {s.check_iterations})"]
-                - db["2D sensor"]},
+            "check_solver": _check_solver(db, s.check_iterations),
             "pupil": {"true_obstruction": s.obstruction, "estimated_obstruction": est.obstruction,
                       "error": abs(est.obstruction - s.obstruction), "blur_views": est.blur},
             "motion_corrected_fraction": float(np.mean(corrected != views)),
