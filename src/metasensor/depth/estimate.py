@@ -43,6 +43,7 @@ from metasensor.config import SystemConfig
 from metasensor.depth import geometry
 from metasensor.depth.aberration import resolve_shift_maps, warp_views
 from metasensor.depth.cost import CostVolume
+from metasensor.depth.edges import EdgeSnap, snap_edges
 from metasensor.depth.filters import GuidedFilter
 from metasensor.depth.refine import (
     fill_low_confidence,
@@ -260,6 +261,7 @@ def estimate_depth(views, cfg: SystemConfig, calibration=None, *, candidates: in
                    fill: bool = True, fill_threshold: float = 0.1,
                    fill_radius: int | None = None, normalize: bool = True,
                    smoothing: SemiGlobal | None = SemiGlobal(),
+                   edges: EdgeSnap | None = None,
                    focal_length: float | None = None, focus_distance: float | None = None,
                    device=None, progress: bool = False) -> DepthResult:
     """Disparity, confidence and depth from views ``(nnum, nnum, H, W)`` (or a ``Capture``).
@@ -286,6 +288,8 @@ def estimate_depth(views, cfg: SystemConfig, calibration=None, *, candidates: in
     smoothing : :class:`metasensor.depth.sgm.SemiGlobal` penalties of the semi-global matching
         that decides at depth edges and thin structures (default), or None: the window
         aggregation alone.
+    edges : :class:`metasensor.depth.edges.EdgeSnap` settings of the re-decision of depth-edge
+        pixels by the front layer's measured coverage (last step), or None (default): none.
     focal_length, focus_distance : main-lens geometry [m] overriding the config's.
     """
     if not isinstance(cfg, SystemConfig):
@@ -295,6 +299,8 @@ def estimate_depth(views, cfg: SystemConfig, calibration=None, *, candidates: in
         fill_radius = min(16, max(arr.shape[2:]))
     mask = _check_settings(cfg, arr, candidates, radius, refine_iterations, refine_radius,
                            fill_radius, eps, disparity_range, view_mask, smoothing)
+    if edges is not None and not isinstance(edges, EdgeSnap):
+        raise TypeError(f"edges must be an EdgeSnap or None, got {type(edges).__name__}")
     n, c = cfg.nnum, cfg.center
     lens = geometry.main_lens_geometry(cfg, focal_length, focus_distance)
     shift_maps = resolve_shift_maps(calibration, n, arr.shape[2:])
@@ -332,6 +338,8 @@ def estimate_depth(views, cfg: SystemConfig, calibration=None, *, candidates: in
         if fill:
             disp = fill_low_confidence(disp, conf, guide, radius=fill_radius,
                                        threshold=fill_threshold, eps=eps)
+        if edges is not None:
+            disp = snap_edges(stack, au, av, disp, edges)
         valid = to_numpy((conf >= fill_threshold) & ~ends).astype(bool)
         disparity = to_numpy(disp).astype(np.float32)
         confidence = to_numpy(conf).astype(np.float32)
