@@ -44,6 +44,7 @@ __all__ = ["EdgeSnap", "snap_edges"]
 
 # tangent directions (dy, dx) of the four edge orientations; the edge normal is perpendicular
 _TANGENTS = ((1, 0), (0, 1), (1, -1), (1, 1))
+GAP = 3  # a run along an edge survives this many pixels in a row that do not match
 
 
 @dataclass(frozen=True)
@@ -62,7 +63,7 @@ class EdgeSnap:
 
     jump: float = 1.5
     margin: float = 2.0
-    length: int = 6
+    length: int = 4
     certainty: float = 2.0
     iterations: int = 2
 
@@ -105,6 +106,8 @@ def _slopes(views, au, av, ys, xs, lo, hi, normal, tangent, margin, nearest):
         vs.append(_sample(views[i], y0 + dfront * float(au[i]), x0 + dfront * float(av[i])))
         qs.append((y0 + delta * float(au[i]), x0 + delta * float(av[i])))
     vs = torch.stack(vs)                                           # (K, M)
+    qy = torch.stack([q[0] for q in qs])                           # (K, M)
+    qx = torch.stack([q[1] for q in qs])
     bsum = torch.zeros_like(vs)
     count = torch.zeros_like(vs)
     ny, nx = normal                                                # towards the background
@@ -117,13 +120,12 @@ def _slopes(views, au, av, ys, xs, lo, hi, normal, tangent, margin, nearest):
         away = -delta * (float(au[j]) * ny + float(av[j]) * nx) >= margin
         if not bool(away.any()):
             continue
-        for k, (qy, qx) in enumerate(qs):
-            cy = torch.round(qy - delta * float(au[j])).long().clamp(0, h - 1)
-            cx = torch.round(qx - delta * float(av[j])).long().clamp(0, w - 1)
-            clear = (away & (nearest[cy, cx] > mid)).float()
-            count[k] += clear
-            bsum[k] += clear * _sample(views[j], qy + dback * float(au[j]),
-                                       qx + dback * float(av[j]))
+        cy = torch.round(qy - delta * float(au[j])).long().clamp(0, h - 1)
+        cx = torch.round(qx - delta * float(av[j])).long().clamp(0, w - 1)
+        clear = (away[None] & (nearest[cy, cx] > mid[None])).to(vs.dtype)
+        count += clear
+        bsum += clear * _sample(views[j], qy + dback[None] * float(au[j]),
+                                qx + dback[None] * float(av[j]))
     # every sample needs its background read at least once
     ok = (count > 0).all(0)
     b = bsum / count.clamp(min=1)
@@ -138,18 +140,25 @@ def _slopes(views, au, av, ys, xs, lo, hi, normal, tangent, margin, nearest):
 
 def _along(values: torch.Tensor, key: torch.Tensor, tangent, length: int,
            tol: torch.Tensor) -> torch.Tensor:
-    """Moments ``Σ_j j^m · values(p + j · tangent)`` (m = 0, 1, 2; ``(3, C, H, W)``) over
-    ``|j| <= length``, over the pixels whose ``key (2, H, W)`` (their layers) matches that of
-    ``p`` within ``tol (H, W)``."""
+    """Moments ``Σ_j j^m · values(p + j · tangent)`` (m = 0, 1, 2; ``(3, C, H, W)``) over the
+    run ``|j| <= length`` of pixels whose ``key (C', H, W)`` matches that of ``p`` within
+    ``tol (H, W)`` (NaN: never), from ``p`` on each side until more than ``GAP`` pixels in a
+    row do not match."""
     ty, tx = tangent
     total = torch.zeros((3, *values.shape), dtype=values.dtype, device=values.device)
     total[0] = values
-    for s in range(1, length + 1):
-        for sign in (1, -1):
+    for sign in (1, -1):
+        misses = torch.zeros(values.shape[1:], dtype=torch.int32, device=values.device)
+        for s in range(1, length + 1):
             sh = (-sign * s * ty, -sign * s * tx)  # brings p + j · tangent to p, j = sign · s
-            other_k = torch.roll(key, shifts=sh, dims=(1, 2))
-            same = ((other_k - key).abs().amax(0) <= tol).to(values.dtype)
-            other_v = torch.roll(values, shifts=sh, dims=(1, 2)) * same[None]
+            match = (torch.roll(key, shifts=sh, dims=(1, 2)) - key).abs().amax(0) <= tol
+            alive = misses <= GAP
+            run = match & alive
+            misses = torch.where(match, torch.zeros_like(misses), misses + 1)
+            misses = torch.where(alive, misses, torch.full_like(misses, GAP + 1))
+            if not bool(alive.any()):
+                break
+            other_v = torch.roll(values, shifts=sh, dims=(1, 2)) * run[None]
             j = float(sign * s)
             total[0] += other_v
             total[1] += j * other_v
@@ -197,7 +206,6 @@ def _one_pass(views, au, av, disp, opts: EdgeSnap, amax: float):
     tangent_of = {0: _TANGENTS[0], 1: _TANGENTS[2], 2: _TANGENTS[1], 3: _TANGENTS[3]}
     h, w = disp.shape
     frac = torch.full((h, w), float("nan"), dtype=disp.dtype, device=disp.device)
-    key = torch.stack([lo, hi])
     tol = 0.25 * (hi - lo)
     for s in range(4):
         sel = edge & (sector == s)
@@ -210,8 +218,8 @@ def _one_pass(views, au, av, disp, opts: EdgeSnap, amax: float):
         normal = (ny * sgn, nx * sgn)
         args = (lo[ys, xs], hi[ys, xs], normal, tangent_of[s], opts.margin, lo)
         # the reference: the next pixel towards the background, read against the same layers
-        ry = (ys + torch.round(normal[0]).long()).clamp(0, h - 1)
-        rx = (xs + torch.round(normal[1]).long()).clamp(0, w - 1)
+        iy, ix = torch.round(normal[0]).long(), torch.round(normal[1]).long()
+        ry, rx = (ys + iy).clamp(0, h - 1), (xs + ix).clamp(0, w - 1)
         ref_ok = ((disp[ry, rx] - hi[ys, xs]).abs() < (disp[ry, rx] - lo[ys, xs]).abs()).float()
         part = torch.zeros((6, h, w), dtype=disp.dtype, device=disp.device)
         sxy, sxx, syy, k = _slopes(views, au, av, ys, xs, *args)
@@ -219,8 +227,15 @@ def _one_pass(views, au, av, disp, opts: EdgeSnap, amax: float):
         part[3, ys, xs] = 1.0
         rxy, rxx, _, _ = _slopes(views, au, av, ry, rx, *args)
         part[4, ys, xs], part[5, ys, xs] = rxy * ref_ok, rxx * ref_ok
-        mom = _along(part, torch.where(sel[None], key, torch.full_like(key, float("nan"))),
-                     tangent_of[s], opts.length, tol)[:, :, ys, xs]
+        # runs along the edge: the same layers (to a quarter of their gap) and the same labels
+        # on either side of the edge (a straight stretch)
+        prof = torch.full((4, h, w), float("nan"), dtype=disp.dtype, device=disp.device)
+        lo_p, hi_p = lo[ys, xs], hi[ys, xs]
+        prof[0, ys, xs], prof[1, ys, xs] = lo_p, hi_p
+        for c, side in ((2, -1), (3, 1)):
+            dq = disp[(ys + side * iy).clamp(0, h - 1), (xs + side * ix).clamp(0, w - 1)]
+            prof[c, ys, xs] = ((dq - lo_p).abs() < (dq - hi_p).abs()).to(disp.dtype) * 1e6
+        mom = _along(part, prof, tangent_of[s], opts.length, tol)[:, :, ys, xs]
         slope, se = _common_slope(mom, k)
         sxx = mom[0, 1]
         # the background's own slope against its estimate (1 but for the estimate's blur)

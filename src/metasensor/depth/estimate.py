@@ -261,7 +261,7 @@ def estimate_depth(views, cfg: SystemConfig, calibration=None, *, candidates: in
                    fill: bool = True, fill_threshold: float = 0.1,
                    fill_radius: int | None = None, normalize: bool = True,
                    smoothing: SemiGlobal | None = SemiGlobal(),
-                   edges: EdgeSnap | None = None,
+                   edges: EdgeSnap | None = EdgeSnap(),
                    focal_length: float | None = None, focus_distance: float | None = None,
                    device=None, progress: bool = False) -> DepthResult:
     """Disparity, confidence and depth from views ``(nnum, nnum, H, W)`` (or a ``Capture``).
