@@ -58,6 +58,8 @@ class EdgeSnap:
     length : half-length [px] of the stretch along the edge whose samples share one slope.
     certainty : the measured coverage must differ from one half by at least this many of its
         standard errors (least squares), or the pixel is left as is.
+    long_length : half-length of a second, longer stretch, used where its coverage agrees
+        with the short one's within one standard error (long straight edges).
     iterations : passes (a pixel given to the other layer makes its neighbour an edge pixel).
     """
 
@@ -65,14 +67,15 @@ class EdgeSnap:
     margin: float = 2.0
     length: int = 4
     certainty: float = 2.0
-    iterations: int = 2
+    long_length: int = 32
+    iterations: int = 4
 
     def __post_init__(self) -> None:
         for name in ("jump", "margin", "certainty"):
             value = getattr(self, name)
             if not (isinstance(value, int | float) and 0 < value < float("inf")):
                 raise ValueError(f"{name} must be a positive number, got {value!r}")
-        for name, low in (("length", 0), ("iterations", 1)):
+        for name, low in (("length", 0), ("long_length", 0), ("iterations", 1)):
             value = getattr(self, name)
             if not (isinstance(value, int) and low <= value <= 64):
                 raise ValueError(f"{name} must be an integer in [{low}, 64], got {value!r}")
@@ -183,6 +186,19 @@ def _common_slope(mom: torch.Tensor, k: int):
     return a, (rss.clamp(min=0) / dof * var_a).sqrt()
 
 
+def _coverage(part, prof, tangent, length: int, tol, k: int, ys, xs):
+    """The front coverage at the pixels ``(ys, xs)`` from the sums ``part`` of
+    :func:`_one_pass` over their runs along ``tangent``: ``(f, standard error, defined)``."""
+    mom = _along(part, prof, tangent, length, tol)[:, :, ys, xs]
+    slope, se = _common_slope(mom, k)
+    # the background's own slope against its estimate (1 but for the estimate's blur)
+    rxy, rxx = mom[0, 4], mom[0, 5]
+    gain = torch.where(rxx > 0, rxy / rxx.clamp(min=1e-30), torch.ones_like(rxx))
+    gain = gain.clamp(0.8, 1.5)
+    ok = (mom[0, 1] > 0) & (mom[0, 3] * k > 2)
+    return 1 - slope / gain, se / gain, ok
+
+
 def _one_pass(views, au, av, disp, opts: EdgeSnap, amax: float):
     """One pass of :func:`snap_edges`: the new disparity, the number of pixels changed and the
     measured front coverage (NaN off the edges and where it is uncertain)."""
@@ -235,17 +251,12 @@ def _one_pass(views, au, av, disp, opts: EdgeSnap, amax: float):
         for c, side in ((2, -1), (3, 1)):
             dq = disp[(ys + side * iy).clamp(0, h - 1), (xs + side * ix).clamp(0, w - 1)]
             prof[c, ys, xs] = ((dq - lo_p).abs() < (dq - hi_p).abs()).to(disp.dtype) * 1e6
-        mom = _along(part, prof, tangent_of[s], opts.length, tol)[:, :, ys, xs]
-        slope, se = _common_slope(mom, k)
-        sxx = mom[0, 1]
-        # the background's own slope against its estimate (1 but for the estimate's blur)
-        rxy, rxx = mom[0, 4], mom[0, 5]
-        gain = torch.where(rxx > 0, rxy / rxx.clamp(min=1e-30), torch.ones_like(rxx))
-        gain = gain.clamp(0.8, 1.5)
-        f = 1 - slope / gain
-        se = se / gain
-        npix = mom[0, 3]
-        sure = ((f - 0.5).abs() >= opts.certainty * se) & (sxx > 0) & (npix * k > 2)
+        f, se, ok = _coverage(part, prof, tangent_of[s], opts.length, tol, k, ys, xs)
+        if opts.long_length > opts.length:  # a long straight stretch, where it agrees
+            f2, se2, ok2 = _coverage(part, prof, tangent_of[s], opts.long_length, tol, k, ys, xs)
+            use = ok2 & (~ok | ((f2 - f).abs() <= se))
+            f, se, ok = torch.where(use, f2, f), torch.where(use, se2, se), ok | ok2
+        sure = ok & ((f - 0.5).abs() >= opts.certainty * se)
         frac[ys, xs] = torch.where(sure, f, torch.full_like(f, float("nan")))
     front_now = (disp - lo).abs() <= (hi - disp).abs()
     to_front = edge & ~front_now & (frac > 0.5)
