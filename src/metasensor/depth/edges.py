@@ -93,7 +93,7 @@ def _sample(img: torch.Tensor, y: torch.Tensor, x: torch.Tensor) -> torch.Tensor
     return out.reshape(y.shape)
 
 
-def _slopes(views, au, av, ys, xs, lo, hi, normal, tangent, margin, nearest):
+def _slopes(views, au, av, ys, xs, lo, hi, normal, tangent, margin, nearest, farthest):
     """Per edge pixel (index arrays ``ys, xs``): the sums ``Σ (B − B̄)(V − V̄)``, ``Σ (B − B̄)²``
     of the front-aligned samples ``V`` against the clear background ``B`` along the views on
     the line ``tangent`` through the centre."""
@@ -111,24 +111,32 @@ def _slopes(views, au, av, ys, xs, lo, hi, normal, tangent, margin, nearest):
     vs = torch.stack(vs)                                           # (K, M)
     qy = torch.stack([q[0] for q in qs])                           # (K, M)
     qx = torch.stack([q[1] for q in qs])
+    h, w = nearest.shape
+    # the background's own disparity near each point (a slanted background), and the point
+    # that view sample sees with it: Q + d_B(Q) a = p + dF a
+    aus = torch.tensor([float(au[i]) for i in on_line], dtype=vs.dtype, device=vs.device)[:, None]
+    avs = torch.tensor([float(av[i]) for i in on_line], dtype=vs.dtype, device=vs.device)[:, None]
+    dq = farthest[torch.round(qy).long().clamp(0, h - 1), torch.round(qx).long().clamp(0, w - 1)]
+    dq = torch.where((dq - dback).abs() <= 0.25 * (dback - dfront), dq, dback.expand_as(dq))
+    qy = y0[None] + (dfront[None] - dq) * aus
+    qx = x0[None] + (dfront[None] - dq) * avs
+    delta = dfront[None] - dq                                      # (K, M), < 0
     bsum = torch.zeros_like(vs)
     count = torch.zeros_like(vs)
     ny, nx = normal                                                # towards the background
-    h, w = nearest.shape
     mid = 0.5 * (dfront + dback)
     for j in range(au.size):
         # the front covering background point q in view j lies at q − Δ a_j: clear when that
         # is at least `margin` px further towards the background side, and when no pixel of
         # the map within one pixel of that point is nearer than halfway to the front
-        away = -delta * (float(au[j]) * ny + float(av[j]) * nx) >= margin
+        away = -delta * (float(au[j]) * ny[None] + float(av[j]) * nx[None]) >= margin
         if not bool(away.any()):
             continue
         cy = torch.round(qy - delta * float(au[j])).long().clamp(0, h - 1)
         cx = torch.round(qx - delta * float(av[j])).long().clamp(0, w - 1)
-        clear = (away[None] & (nearest[cy, cx] > mid[None])).to(vs.dtype)
+        clear = (away & (nearest[cy, cx] > mid[None])).to(vs.dtype)
         count += clear
-        bsum += clear * _sample(views[j], qy + dback[None] * float(au[j]),
-                                qx + dback[None] * float(av[j]))
+        bsum += clear * _sample(views[j], qy + dq * float(au[j]), qx + dq * float(av[j]))
     # every sample needs its background read at least once
     ok = (count > 0).all(0)
     b = bsum / count.clamp(min=1)
@@ -232,7 +240,7 @@ def _one_pass(views, au, av, disp, opts: EdgeSnap, amax: float):
         ny, nx = normal_of[s]
         sgn = torch.sign(gy[ys, xs] * ny + gx[ys, xs] * nx)  # not 0: sector from (gy, gx)
         normal = (ny * sgn, nx * sgn)
-        args = (lo[ys, xs], hi[ys, xs], normal, tangent_of[s], opts.margin, lo)
+        args = (lo[ys, xs], hi[ys, xs], normal, tangent_of[s], opts.margin, lo, hi)
         # the reference: the next pixel towards the background, read against the same layers
         iy, ix = torch.round(normal[0]).long(), torch.round(normal[1]).long()
         ry, rx = (ys + iy).clamp(0, h - 1), (xs + ix).clamp(0, w - 1)
