@@ -240,10 +240,13 @@ def _one_pass(views, au, av, disp, opts: EdgeSnap, amax: float):
         ny, nx = normal_of[s]
         sgn = torch.sign(gy[ys, xs] * ny + gx[ys, xs] * nx)  # not 0: sector from (gy, gx)
         normal = (ny * sgn, nx * sgn)
-        args = (lo[ys, xs], hi[ys, xs], normal, tangent_of[s], opts.margin, lo, hi)
-        # the reference: the next pixel towards the background, read against the same layers
         iy, ix = torch.round(normal[0]).long(), torch.round(normal[1]).long()
         ry, rx = (ys + iy).clamp(0, h - 1), (xs + ix).clamp(0, w - 1)
+        # the front's own disparity: the next pixel into the front where it is labelled so
+        dn = disp[(ys - iy).clamp(0, h - 1), (xs - ix).clamp(0, w - 1)]
+        front = torch.where((dn - lo[ys, xs]).abs() < (dn - hi[ys, xs]).abs(), dn, lo[ys, xs])
+        args = (front, hi[ys, xs], normal, tangent_of[s], opts.margin, lo, hi)
+        # the reference: the next pixel towards the background, read against the same layers
         ref_ok = ((disp[ry, rx] - hi[ys, xs]).abs() < (disp[ry, rx] - lo[ys, xs]).abs()).float()
         part = torch.zeros((6, h, w), dtype=disp.dtype, device=disp.device)
         sxy, sxx, syy, k = _slopes(views, au, av, ys, xs, *args)
