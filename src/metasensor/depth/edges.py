@@ -231,6 +231,7 @@ def _one_pass(views, au, av, disp, opts: EdgeSnap, amax: float):
     h, w = disp.shape
     frac = torch.full((h, w), float("nan"), dtype=disp.dtype, device=disp.device)
     tol = 0.25 * (hi - lo)
+    to_val = torch.stack([lo, hi])
     for s in range(4):
         sel = edge & (sector == s)
         if not bool(sel.any()):
@@ -248,6 +249,9 @@ def _one_pass(views, au, av, disp, opts: EdgeSnap, amax: float):
         args = (front, hi[ys, xs], normal, tangent_of[s], opts.margin, lo, hi)
         # the reference: the next pixel towards the background, read against the same layers
         ref_ok = ((disp[ry, rx] - hi[ys, xs]).abs() < (disp[ry, rx] - lo[ys, xs]).abs()).float()
+        # the values a re-decided pixel takes: its neighbours' across the edge where labelled so
+        to_val[0, ys, xs] = front
+        to_val[1, ys, xs] = torch.where(ref_ok > 0, disp[ry, rx], hi[ys, xs])
         part = torch.zeros((6, h, w), dtype=disp.dtype, device=disp.device)
         sxy, sxx, syy, k = _slopes(views, au, av, ys, xs, *args)
         part[0, ys, xs], part[1, ys, xs], part[2, ys, xs] = sxy, sxx, syy
@@ -272,7 +276,7 @@ def _one_pass(views, au, av, disp, opts: EdgeSnap, amax: float):
     front_now = (disp - lo).abs() <= (hi - disp).abs()
     to_front = edge & ~front_now & (frac > 0.5)
     to_back = edge & front_now & (frac < 0.5)
-    out = torch.where(to_front, lo, torch.where(to_back, hi, disp))
+    out = torch.where(to_front, to_val[0], torch.where(to_back, to_val[1], disp))
     return out, int(to_front.sum() + to_back.sum()), frac
 
 
