@@ -207,13 +207,22 @@ def _coverage(part, prof, tangent, length: int, tol, k: int, ys, xs):
     return 1 - slope / gain, se / gain, ok
 
 
-def _one_pass(views, au, av, disp, opts: EdgeSnap, amax: float):
+def _one_pass(views, au, av, disp, opts: EdgeSnap, amax: float, allowed=None):
     """One pass of :func:`snap_edges`: the new disparity, the number of pixels changed and the
     measured front coverage (NaN off the edges and where it is uncertain)."""
     pad = F.pad(disp[None, None], (1, 1, 1, 1), mode="replicate")
     lo = -F.max_pool2d(-pad, 3, stride=1)[0, 0]
     hi = F.max_pool2d(pad, 3, stride=1)[0, 0]
     edge = (hi - lo) * amax >= opts.jump
+    if allowed is not None:
+        edge &= allowed
+    # two layers only: every value of the 3 x 3 within a quarter of the gap of one of them
+    near = F.unfold(pad[None] if pad.ndim == 3 else pad, 3)[0].reshape(9, *disp.shape)
+    gap = 0.25 * (hi - lo)
+    edge &= (torch.minimum((near - lo).abs(), (near - hi).abs()) <= gap).all(0)
+    # and the pixel itself on one of them (not a third layer between)
+    own = torch.minimum((disp - lo).abs(), (disp - hi).abs())
+    edge &= own <= torch.clamp(gap, max=0.5 * opts.jump / amax)
     if not bool(edge.any()):
         return disp, 0, torch.full_like(disp, float("nan"))
     # Sobel gradient (a pixel touching the other layer only at a corner still gets a normal)
@@ -230,7 +239,7 @@ def _one_pass(views, au, av, disp, opts: EdgeSnap, amax: float):
     tangent_of = {0: _TANGENTS[0], 1: _TANGENTS[2], 2: _TANGENTS[1], 3: _TANGENTS[3]}
     h, w = disp.shape
     frac = torch.full((h, w), float("nan"), dtype=disp.dtype, device=disp.device)
-    tol = 0.25 * (hi - lo)
+    tol = gap
     to_val = torch.stack([lo, hi])
     for s in range(4):
         sel = edge & (sector == s)
@@ -300,8 +309,13 @@ def snap_edges(views: torch.Tensor, au, av, disparity: torch.Tensor,
     av = np.asarray(av, dtype=np.float64)
     amax = float(max(np.abs(au).max(), np.abs(av).max()))
     disp = disparity.clone()
+    # later passes stay within one pixel of the edges of the given map
+    pad = F.pad(disp[None, None], (1, 1, 1, 1), mode="replicate")
+    step = (F.max_pool2d(pad, 3, stride=1) + F.max_pool2d(-pad, 3, stride=1))[0, 0] * amax
+    allowed = F.max_pool2d((step >= options.jump).float()[None, None], 3, stride=1,
+                           padding=1)[0, 0] > 0
     for _ in range(options.iterations):
-        disp, changed, _ = _one_pass(views, au, av, disp, options, amax)
+        disp, changed, _ = _one_pass(views, au, av, disp, options, amax, allowed)
         if changed == 0:
             break
     return disp
