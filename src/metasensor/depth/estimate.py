@@ -16,7 +16,9 @@ Pipeline (the paper's Fig. 6 and Methods, "Depth estimation"):
    structures (where the two disagree by more than ``AGREE_PX`` at the outermost view).
 3. Winner-take-all with a parabola fit, a peak-ratio confidence, then Gauss–Newton refinement of
    the disparity on the views themselves (continuous, no candidate grid).
-4. Optional confidence-weighted, edge-aware filling of low-confidence pixels.
+4. Optional confidence-weighted, edge-aware filling of low-confidence pixels; then, by
+   default, each depth-edge pixel given the layer that covers more than half its footprint, as
+   the views measure it (``metasensor.depth.edges``).
 5. Disparity → image-side depth ``z = δ · d · mla_focal``; with the main-lens focal length and
    focus distance (config or keywords), → object distance by the thin-lens equation
    (``metasensor.depth.geometry`` states the signs).
@@ -132,14 +134,14 @@ def _check_views(views, cfg: SystemConfig) -> np.ndarray:
     return arr
 
 
-
-
 def _check_settings(cfg, arr, candidates, radius, refine_iterations, refine_radius, fill_radius,
-                    eps, disparity_range, view_mask, smoothing=None) -> np.ndarray:
+                    eps, disparity_range, view_mask, smoothing=None, edges=None) -> np.ndarray:
     """Validate the settings (one-line errors); returns the boolean view mask."""
-    if smoothing is not None and not isinstance(smoothing, SemiGlobal):
-        raise TypeError(f"smoothing must be a SemiGlobal or None, got "
-                        f"{type(smoothing).__name__}")
+    for name, value, kind in (("smoothing", smoothing, SemiGlobal), ("edges", edges, EdgeSnap)):
+        if value is not None and not isinstance(value, kind):
+            article = "an" if kind.__name__[0] in "AEIOU" else "a"
+            raise TypeError(f"{name} must be {article} {kind.__name__} or None, got "
+                            f"{type(value).__name__}")
     n, c = cfg.nnum, cfg.center
     side = max(arr.shape[2:])
     # upper bounds: windows beyond the view, and sweeps finer than 1/1000 of the range (a cost
@@ -298,9 +300,7 @@ def estimate_depth(views, cfg: SystemConfig, calibration=None, *, candidates: in
     if fill_radius is None:
         fill_radius = min(16, max(arr.shape[2:]))
     mask = _check_settings(cfg, arr, candidates, radius, refine_iterations, refine_radius,
-                           fill_radius, eps, disparity_range, view_mask, smoothing)
-    if edges is not None and not isinstance(edges, EdgeSnap):
-        raise TypeError(f"edges must be an EdgeSnap or None, got {type(edges).__name__}")
+                           fill_radius, eps, disparity_range, view_mask, smoothing, edges)
     n, c = cfg.nnum, cfg.center
     lens = geometry.main_lens_geometry(cfg, focal_length, focus_distance)
     shift_maps = resolve_shift_maps(calibration, n, arr.shape[2:])
