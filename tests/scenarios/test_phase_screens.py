@@ -65,3 +65,35 @@ def test_layered_turbulence_flows_and_differs_over_field():
     assert np.allclose(fz[0], 0, atol=1e-9) and np.linalg.norm(fz[1]) > 0.02
     z = fit_screen(scr[4].astype(float))
     assert z[:3].tolist() == [0, 0, 0] and np.isfinite(z).all()
+
+
+def test_plastic_wrap_block_variation_grows_with_spread_and_block_size():
+    # DAO assumes one aberration per block: the wrap's change from a block's centre to its
+    # corners is 0 for a wrap seen alike by every field point, and grows with the footprints'
+    # spread over the field and with the block's size
+    still = PlasticWrap(correlation=0.25, spread=0.0, samples=32).block_variation((2, 2))
+    assert still.shape == (2, 2) and np.allclose(still, 0)
+    narrow = PlasticWrap(correlation=0.25, spread=0.15, samples=32).block_variation((2, 2))
+    wide = PlasticWrap(correlation=0.25, spread=0.6, samples=32).block_variation((2, 2))
+    small = PlasticWrap(correlation=0.25, spread=0.6, samples=32).block_variation((4, 4))
+    assert 0 < narrow.mean() < wide.mean()
+    assert small.mean() < wide.mean()
+    with pytest.raises(ValueError, match="blocks"):
+        PlasticWrap().block_variation((0, 2))
+
+
+def test_plastic_wrap_scenario_wrap_is_uniform_enough_per_dao_block():
+    # the scenario's wrap: anisoplanatic over the field (blocks' Noll 4-45 differ by about a
+    # wave) yet within 0.25 waves of uniform over each of its 4 x 4 DAO blocks, where DAO's
+    # estimates stay within 0.4 waves of the truth (0.6 D of spread: 0.8 waves per block, DAO
+    # off by up to 1.1 waves; docs/decisions.md)
+    from metasensor.optics.field import block_centres_normalised
+    from metasensor.scenarios.plastic_wrap import PlasticWrapSettings
+
+    s = PlasticWrapSettings()
+    assert s.blocks == (4, 4)
+    assert s.wrap.block_variation(s.blocks).max() < 0.25
+    yn, xn = block_centres_normalised(4, 4)
+    z = s.wrap.field_zernike()(yn, xn)[..., 3:].reshape(16, -1)
+    assert np.sqrt(((z[:, None] - z[None]) ** 2).sum(-1)).max() > 1.0
+    assert np.sqrt((z**2).sum(-1)).min() > 0.9  # about a wave or more at every block

@@ -100,3 +100,16 @@ def test_gigapixel_settings_default_to_the_space_variant_model():
     assert GigapixelSettings().space_variant is True
     with pytest.raises(TypeError, match="space_variant"):
         GigapixelSettings(space_variant=1)
+
+
+def test_frequency_floor_is_the_lowest_bin_read():
+    from metasensor.scenarios.measure import frequency_floor
+
+    # 56-px regions are read in 14 bins over 0..0.5 cycles/px, 240-px regions in 60
+    assert frequency_floor((56, 60)) == pytest.approx(0.25 / 14)
+    assert frequency_floor((240, 240)) == pytest.approx(0.25 / 60)
+    assert frequency_floor((16, 16)) == pytest.approx(0.25 / 8)
+    rng = np.random.default_rng(2)
+    truth = rng.random((56, 56))
+    flat = np.full_like(truth, truth.mean())
+    assert resolved_frequency(flat, truth) < frequency_floor(truth.shape)

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["resolved_frequency", "field_resolution", "bar_periods", "bar_gains",
+__all__ = ["resolved_frequency", "frequency_floor", "field_resolution", "bar_periods", "bar_gains",
            "lattice_energy"]
 
 
@@ -45,6 +45,15 @@ def resolved_frequency(image, truth, threshold: float = 0.5) -> float:
         raise ValueError(f"image and truth must be equal 2-D regions >= 16 px, got "
                          f"{img.shape} and {tru.shape}")
     return spectral_resolved(img, tru, threshold)
+
+
+def frequency_floor(shape: tuple[int, int]) -> float:
+    """The lowest frequency [cycles/px] :func:`resolved_frequency` reads in a region of
+    ``shape``: the centre of the first of the radial bins of
+    :func:`metasensor.metrics.spectral.spectral_fidelity` (``min(H, W) // 4`` bins, 8 to 64,
+    over 0..0.5 cycles/px). A region that resolves nothing (0) resolves less than this."""
+    n = int(np.clip(min(int(shape[0]), int(shape[1])) // 4, 8, 64))
+    return 0.25 / n
 
 
 def field_resolution(image, truth, grid: tuple[int, int] = (4, 4), **kw) -> np.ndarray:

@@ -207,6 +207,27 @@ class PlasticWrap:
 
         return fz
 
+    def block_variation(self, blocks: tuple[int, int], jmax: int = 45) -> np.ndarray:
+        """(by, bx) waves: for a ``blocks`` grid of equal blocks over the field, the r.m.s.
+        (Noll 4..jmax) of the largest difference between the wavefront at a block's centre and
+        at its four corners: how far the wrap is from uniform over one block, which multisite
+        DAO assumes (Wu et al. 2022, Methods: "We assume the aberration is uniform in each
+        block")."""
+        by, bx = (int(b) for b in blocks)
+        if by < 1 or bx < 1:
+            raise ValueError(f"blocks must be two positive integers, got {blocks}")
+        from metasensor.optics.field import block_centres_normalised
+
+        fz = self.field_zernike(jmax)
+        yc, xc = block_centres_normalised(by, bx)
+        centre = fz(yc, xc)[..., 3:]
+        worst = np.zeros((by, bx))
+        for dy in (-1.0 / by, 1.0 / by):
+            for dx in (-1.0 / bx, 1.0 / bx):
+                diff = fz(yc + dy, xc + dx)[..., 3:] - centre
+                worst = np.maximum(worst, np.sqrt((diff**2).sum(-1)))
+        return worst
+
 
 @functools.lru_cache(maxsize=8)
 def _wrap_sheets(wrap: PlasticWrap) -> np.ndarray:
