@@ -143,6 +143,23 @@ def make_geometry(window: tuple[int, int], d: int, radius: int, pad: bool = True
     return Geometry((sy, sx), d, (lead, lead), (my, mx))
 
 
+def _column_fold(geometry: Geometry, device) -> tuple:
+    """Index tensors of the column fold of :meth:`PhaseSpaceOperator.samples_from_folded`: the
+    half-spectrum column k of the samples (k < Mx//2+1) sums the domain's columns k + b·Mx
+    (b < d); those under Nx//2+1 are read directly (``direct``: destination, source), the others
+    as conj(F(−p, Nx − k)) (``source`` columns, ``conj`` destinations, ``flip`` the rows −p)."""
+    d = geometry.d
+    my, mx = geometry.grid
+    nx = geometry.domain[1]
+    nh = nx // 2 + 1
+    dest = torch.arange(mx // 2 + 1, device=device)[:, None].expand(-1, d).flatten()
+    col = (torch.arange(mx // 2 + 1, device=device)[:, None]
+           + mx * torch.arange(d, device=device)[None]).flatten()
+    inside = col < nh
+    flip = torch.remainder(-torch.arange(my, device=device), my)
+    return ((dest[inside], col[inside]), nx - col[~inside], dest[~inside], flip)
+
+
 class GridShapes:
     """``domain_shape`` and ``range_shape`` of a phase-space operator from its ``geometry`` and
     ``n_views`` (shared by every operator on a :class:`Geometry`)."""
@@ -203,6 +220,7 @@ class PhaseSpaceOperator(GridShapes):
         self.otf = self._otfs(psf_t)
         my, mx = geometry.grid
         self._cols = torch.arange(nx // 2 + 1, device=self.device) % mx
+        self._xfold = _column_fold(geometry, self.device)
         self.psf_sums = psf_t.sum(dim=(-2, -1))
 
     # ------------------------------------------------------------------ setup
@@ -240,9 +258,24 @@ class PhaseSpaceOperator(GridShapes):
         folded = torch.mul(otf[:, 0], spec[0])
         for k in range(1, d):
             folded.addcmul_(otf[:, k], spec[k])
-        rows = torch.fft.ifft(folded, dim=-2)  # the sampled rows' half spectra along x
-        full = torch.fft.irfft(rows, n=nx, dim=-1)
-        return full[..., ::d] / d
+        return self.samples_from_folded(folded)
+
+    def samples_from_folded(self, folded: torch.Tensor) -> torch.Tensor:
+        """View samples (c, My, Mx) from their row-folded half spectra (c, My, Nx//2+1): the
+        columns folded too (sampling every d-th column: the sum over the d column sub-bands,
+        the half spectrum's missing half from Hermitian symmetry), then inverse transforms at
+        the samples' size (not the domain's, then every d-th column)."""
+        d = self.geometry.d
+        mx = self.geometry.grid[1]
+        direct, source, conj, flip = self._xfold
+        small = torch.zeros((*folded.shape[:-1], mx // 2 + 1), dtype=folded.dtype,
+                            device=folded.device)
+        small.index_add_(-1, direct[0], folded.index_select(-1, direct[1]))
+        if source.numel():
+            part = folded.index_select(-1, source).index_select(-2, flip).conj()
+            small.index_add_(-1, conj, part)
+        rows = torch.fft.ifft(small, dim=-2)  # the sampled rows' half spectra along x
+        return torch.fft.irfft(rows, n=mx, dim=-1) / (d * d)
 
     def new_conj_accumulator(self) -> torch.Tensor:
         """Zeroed (d, My, Nx//2+1) accumulator for :meth:`backproject_conj`."""

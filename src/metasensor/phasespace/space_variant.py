@@ -161,8 +161,7 @@ class SpaceVariantOperator(GridShapes):
                 for k in range(d):
                     folded = (torch.mul(otf[:, k], spec[k]) if folded is None
                               else folded.addcmul_(otf[:, k], spec[k]))
-            rows = torch.fft.ifft(folded, dim=-2)
-            out.append(torch.fft.irfft(rows, n=nx, dim=-1)[..., ::d] / d)
+            out.append(self.ops[0].samples_from_folded(folded))
         return torch.cat(out)
 
     def adjoint(self, samples, views=None) -> torch.Tensor:

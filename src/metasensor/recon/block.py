@@ -20,8 +20,9 @@ import numpy as np
 from metasensor.config import SystemConfig
 from metasensor.dao.estimate import DaoOptions
 from metasensor.recon.blocks import Block
+from metasensor.recon.dao_choice import PROBE_SAMPLES
 
-__all__ = ["BlockTask", "BlockResult", "reconstruct_block", "default_psfs"]
+__all__ = ["BlockTask", "BlockResult", "reconstruct_block", "default_psfs", "probe_window"]
 
 
 @dataclass
@@ -46,6 +47,9 @@ class BlockTask:
     dao_negligible : float
         Waves r.m.s. (Noll 4-45): an estimate that differs from ``zernike`` by less is not
         applied (the block keeps ``zernike``'s bank); 0: always applied.
+    probe_samples : int
+        With ``dao_negligible``: view samples per side of the sub-window the probe decides on
+        (:func:`probe_window`); windows no larger are probed whole.
     """
 
     block: Block
@@ -64,6 +68,7 @@ class BlockTask:
     progress: Any = None  # callable(n), local runs only
     corner_zernike: np.ndarray | None = None  # (4, J): the space-variant model's field points
     dao_negligible: float = 0.0
+    probe_samples: int = PROBE_SAMPLES
 
 
 @dataclass
@@ -140,18 +145,55 @@ def _window(task: BlockTask) -> np.ndarray:
     return window
 
 
+def _starts(n: int, size: int) -> list[int]:
+    """Start offsets of a ``size`` span in ``n``: the centred one first, then both ends."""
+    return list(dict.fromkeys(((n - size) // 2, 0, n - size)))
+
+
+def probe_window(window: np.ndarray, samples: int) -> np.ndarray:
+    """The ``samples`` x ``samples`` sub-window (view samples; the whole axis where it is
+    shorter) of a block's ``window`` ``(nnum, nnum, h, w)`` with the most detail: of the
+    centred span and the two end spans per axis (9 candidates), the one whose summed views
+    have the largest sum of squared differences between neighbouring samples (ties: the
+    centre). A view shift is measured from the image's gradients, so a featureless part of
+    the block is never chosen over a textured one."""
+    h, w = window.shape[-2:]
+    sy, sx = min(h, samples), min(w, samples)
+    if (sy, sx) == (h, w):
+        return window
+    img = window.sum(axis=(0, 1), dtype=np.float64)
+    gy = np.zeros((h + 1, w + 1))  # integral images of the squared differences
+    gy[1:h, 1:] = np.cumsum(np.cumsum(np.diff(img, axis=0) ** 2, 0), 1)
+    gx = np.zeros((h + 1, w + 1))
+    gx[1:, 1:w] = np.cumsum(np.cumsum(np.diff(img, axis=1) ** 2, 0), 1)
+
+    def box(t: np.ndarray, y0: int, y1: int, x0: int, x1: int) -> float:
+        return float(t[y1, x1] - t[y0, x1] - t[y1, x0] + t[y0, x0])
+
+    best, where = -1.0, (0, 0)
+    for y0 in _starts(h, sy):
+        for x0 in _starts(w, sx):
+            score = box(gy, y0, y0 + sy - 1, x0, x0 + sx) + box(gx, y0, y0 + sy, x0, x0 + sx - 1)
+            if score > best:
+                best, where = score, (y0, x0)
+    y0, x0 = where
+    return window[:, :, y0:y0 + sy, x0:x0 + sx]
+
+
 def _probe(task: BlockTask, window: np.ndarray, dao, init):
-    """With ``dao_negligible``: one DAO update on the block's ISA image (cheap: no per-view
-    deconvolution), returned when its estimate is negligible, else None (the full estimate
-    runs, from the start again: far from the truth the ISA image absorbs part of the error)."""
+    """With ``dao_negligible``: one DAO update on the ISA image of the block's
+    :func:`probe_window` (cheap: no per-view deconvolution, a sub-window), returned when its
+    estimate is negligible, else None (the full estimate runs on the whole window, from the
+    start again: far from the truth the ISA image absorbs part of the error)."""
     if task.dao_negligible <= 0:
         return None
     import math
 
     from metasensor.dao import estimate
 
-    probe = estimate.run_dao(window, task.cfg, replace(dao, max_iter=1, isa_below=math.inf),
-                             init=init, device=task.device)
+    probe = estimate.run_dao(probe_window(window, task.probe_samples), task.cfg,
+                             replace(dao, max_iter=1, isa_below=math.inf), init=init,
+                             device=task.device)
     start = np.zeros(0) if init is None else np.asarray(init, np.float64)
     return probe if _negligible(np.asarray(probe.zernike), start, task.dao_negligible) else None
 

@@ -5,7 +5,11 @@ Methods, "ISA with multisite DAO in wave optics"): the optics of a real capture 
 well enough. ``"auto"`` follows it where nothing else says what the aberration is: without a
 PSF bank, a Noll vector or a field map (a system calibration), every block runs wave-optics DAO,
 and a block whose estimate is negligible (under :data:`NEGLIGIBLE_RMS` waves r.m.s., Noll 4-45)
-keeps the aberration-free bank, so an aberration-free capture gets the plain ISA image. Where the
+keeps the aberration-free bank, so an aberration-free capture gets the plain ISA image. Whether
+the estimate is negligible is decided by a probe: one DAO update on the ISA image of at most
+:data:`PROBE_SAMPLES` x :data:`PROBE_SAMPLES` view samples of the block (the most detailed of its
+centre and edges); only a probe above the threshold runs the full estimate on the whole block.
+Where the
 aberration is given, ``"auto"`` uses it as is (``"wave"`` with it starts DAO from it). Why the
 threshold is what it is: docs/decisions.md ("the DAO default").
 """
@@ -14,12 +18,16 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-__all__ = ["DAO_CHOICES", "NEGLIGIBLE_RMS", "DaoChoice", "choose_dao"]
+__all__ = ["DAO_CHOICES", "NEGLIGIBLE_RMS", "PROBE_SAMPLES", "DaoChoice", "choose_dao"]
 
 #: what ``method`` / ``--dao`` accept ("none" is "isa": no aberration estimate)
 DAO_CHOICES = ("auto", "none", "isa", "wave", "geometric")
 #: waves r.m.s. (Noll 4-45) under which ``"auto"`` keeps a block's aberration-free bank
 NEGLIGIBLE_RMS = 0.02
+#: view samples per side of the sub-window on which a block's probe decides (larger windows:
+#: :func:`metasensor.recon.block.probe_window`); why: docs/decisions.md ("the cost of the
+#: default reconstruction")
+PROBE_SAMPLES = 160
 
 
 @dataclass(frozen=True)

@@ -10,6 +10,7 @@ import numpy as np
 
 from metasensor.dao.estimate import DaoOptions
 from metasensor.phasespace.views import ORDERS
+from metasensor.recon.dao_choice import PROBE_SAMPLES
 from metasensor.solvers.hqs import HQSOptions
 from metasensor.solvers.noise_model import PoissonGaussian
 
@@ -77,6 +78,10 @@ class ReconOptions:
         Waves r.m.s. (Noll 4-45): a block whose DAO estimate differs from its starting
         aberration by less keeps the bank of that aberration (None: ``method="auto"``'s
         :data:`metasensor.recon.dao_choice.NEGLIGIBLE_RMS`, else 0: always applied).
+    dao_probe_samples : int
+        View samples per side (at least 8) of the sub-window on which a block's probe decides
+        whether its estimate is negligible (default
+        :data:`metasensor.recon.dao_choice.PROBE_SAMPLES`; smaller windows are probed whole).
     device : str or None
         "cpu" or "cuda" (default: CUDA when present).
     psf : numpy.ndarray or None
@@ -106,6 +111,7 @@ class ReconOptions:
     space_variant: bool = False
     dao: DaoOptions | None = None
     dao_negligible: float | None = None
+    dao_probe_samples: int = PROBE_SAMPLES
     device: Any = None
     psf: Any = None
     psf_fn: Any = None
@@ -119,6 +125,9 @@ class ReconOptions:
                           ("margin", 0)):
             _int_or_none(name, getattr(self, name), low)
         _int_or_none("overlap", self.overlap, 0)
+        s = self.dao_probe_samples
+        if isinstance(s, bool) or not isinstance(s, int | np.integer) or s < 8:
+            raise ValueError(f"dao_probe_samples must be an integer >= 8, got {s!r}")
         r = self.view_radius
         if r is not None and (isinstance(r, bool) or not (
                 isinstance(r, int | float | np.number) and math.isfinite(r) and r >= 0)):
