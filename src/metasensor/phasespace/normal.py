@@ -29,10 +29,42 @@ from metasensor.phasespace.operator import PhaseSpaceOperator
 __all__ = ["FoldedNormal"]
 
 
-class FoldedNormal:
-    """G(p, q) = fft-domain AᵀA of ``op`` as a (My, Mx, d², d²) complex64 tensor (built once).
+def _partner(g, q: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Where the folded columns ``q`` of a real image's spectrum have their conjugates: the
+    spectrum at −f is the conjugate of that at f, so alias (a, b) of the view frequency (p, q)
+    is the conjugate of alias (a', b') of (−p, −q). Returns the rows ``(−p) mod My``, the
+    columns ``(−q) mod Mx`` and the alias index a'·d + b' (My, len(q), d²) (a' = d−1−a, or
+    −a mod d on row 0; b' likewise)."""
+    d = g.d
+    my, mx = g.grid
+    dev = q.device
+    p = torch.arange(my, device=dev)
+    k = torch.arange(d, device=dev)
+    a = torch.where(p[:, None] > 0, d - 1 - k[None], torch.remainder(-k, d)[None])  # (My, d)
+    b = torch.where(q[:, None] > 0, d - 1 - k[None], torch.remainder(-k, d)[None])  # (nq, d)
+    alias = (a[:, None, :, None] * d + b[None, :, None, :]).reshape(my, len(q), d * d)
+    return torch.remainder(-p, my), torch.remainder(-q, mx), alias
 
-    Memory: My·Mx·d⁴·8 bytes (2,100² px domain, d = 3: 290 MB). Calls never change the object.
+
+def _conjugates(values: torch.Tensor, partner) -> torch.Tensor:
+    """The conjugate partners (:func:`_partner`) of folded values (My, Mx', k[, k])."""
+    rows, cols, alias = partner
+    out = values.index_select(0, rows).index_select(1, cols).conj()
+    if values.ndim == 3:
+        return torch.gather(out, 2, alias)
+    k = alias.shape[-1]
+    out = torch.gather(out, 2, alias[..., None].expand(-1, -1, -1, k))
+    return torch.gather(out, 3, alias[:, :, None, :].expand(-1, -1, k, -1))
+
+
+class FoldedNormal:
+    """G(p, q) = fft-domain AᵀA of ``op``, built once for the view frequencies q < Mx//2+1
+    (:attr:`half`, (My, Mx//2+1, d², d²) complex64): the others are their conjugates with the
+    aliases permuted (a real PSF's spectrum is Hermitian), and so are the right-hand sides and
+    solutions of real images, so products, factorisations and solves run on that half.
+
+    Memory: about My·Mx·d⁴·4 bytes (2,100² px domain, d = 3: 145 MB). Calls never change the
+    object.
     """
 
     def __init__(self, op: PhaseSpaceOperator) -> None:
@@ -42,20 +74,42 @@ class FoldedNormal:
         my, mx = g.grid
         ny, nx = g.domain
         nh = nx // 2 + 1
+        mh = mx // 2 + 1
+        cols = torch.arange(mx, device=self.device)
+        self._rest = _partner(g, cols[mh:])  # the columns made from the half
+        self._own = _partner(g, cols[:mh])  # the half's own conjugates (symmetrised input)
         # the full spectra from the operator's half spectra (a real PSF's spectrum is Hermitian:
         # H(ky, kx) = conj H(−ky, Nx − kx) for kx >= Nx//2 + 1), not from new FFTs
         rows = torch.remainder(-torch.arange(ny, device=self.device), ny)
         cols = nx - torch.arange(nh, nx, device=self.device)
-        mat = torch.zeros((my, mx, d * d, d * d), dtype=torch.complex64, device=self.device)
+        mat = torch.zeros((my, mh, d * d, d * d), dtype=torch.complex64, device=self.device)
         for i in range(0, op.n_views, op.chunk):
             half = op.otf[i:i + op.chunk]
             full = torch.empty((half.shape[0], ny, nx), dtype=torch.complex64,
                                device=self.device)
             full[..., :nh] = half
             full[..., nh:] = half[:, rows][..., cols].conj()
-            h = self.fold(full)
+            h = self.fold(full)[:, :, :mh]
             mat += torch.einsum("vpqi,vpqj->pqij", h.conj(), h)
-        self.matrix = mat / (d * d)
+        self.half = mat / (d * d)
+        self.scale = float(self.half.diagonal(dim1=-2, dim2=-1).real.max())
+
+    @property
+    def matrix(self) -> torch.Tensor:
+        """G for every view frequency, (My, Mx, d², d²) complex64 (made from :attr:`half`)."""
+        return self.expand(self.half)
+
+    def expand(self, half: torch.Tensor) -> torch.Tensor:
+        """(My, Mx//2+1, k[, k]) folded values of a real image's spectrum (or of a matrix per
+        frequency acting on them) → (My, Mx, k[, k]): the other columns by conjugate symmetry
+        with the aliases permuted."""
+        mh = half.shape[1]
+        rest = _conjugates(half, self._rest)
+        out = torch.empty((half.shape[0], mh + rest.shape[1], *half.shape[2:]),
+                          dtype=half.dtype, device=half.device)
+        out[:, :mh] = half
+        out[:, mh:] = rest
+        return out
 
     # ------------------------------------------------------------------ layout
     def fold(self, spec: torch.Tensor) -> torch.Tensor:
@@ -75,35 +129,48 @@ class FoldedNormal:
         return folded.reshape(my, mx, d, d).permute(2, 0, 3, 1).reshape(my * d, mx * d)
 
     # ------------------------------------------------------------------ operators
+    def _folded_half(self, image) -> torch.Tensor:
+        """(My, Mx//2+1, d²) folded spectrum of a real domain image."""
+        x = torch.as_tensor(image, dtype=torch.float32, device=self.device)
+        full = self.fold(torch.fft.fft2(x))
+        # the mean with the conjugates: exactly Hermitian, as the real image's spectrum is
+        return (full[:, :self.half.shape[1]] + _conjugates(full, self._own)) / 2
+
+    def _image(self, folded_half: torch.Tensor) -> torch.Tensor:
+        """The real domain image of a folded half spectrum (:meth:`expand`, then inverse)."""
+        return torch.fft.ifft2(self.unfold(self.expand(folded_half))).real
+
     def apply(self, image) -> torch.Tensor:
         """AᵀA·image on the circular domain, through G (equals op.adjoint(op.forward(image)))."""
-        x = torch.as_tensor(image, dtype=torch.float32, device=self.device)
-        xf = self.fold(torch.fft.fft2(x))
-        y = torch.einsum("pqij,pqj->pqi", self.matrix, xf)
-        return torch.fft.ifft2(self.unfold(y)).real
+        y = torch.einsum("pqij,pqj->pqi", self.half, self._folded_half(image))
+        return self._image(y)
 
     def eigenvalues(self) -> torch.Tensor:
         """(My, Mx, d²) eigenvalues of G per view frequency, ascending (squared singular values
         of the measurement, in the units of op: divide by their maximum for a relative scale)."""
-        return torch.linalg.eigvalsh(self.matrix)
+        ev = torch.linalg.eigvalsh(self.half)  # a conjugate's eigenvalues are the same
+        rows, cols, _ = self._rest
+        return torch.cat([ev, ev.index_select(0, rows).index_select(1, cols)], dim=1)
 
     def factor(self, lam: float, weights: torch.Tensor | None = None) -> torch.Tensor:
-        """The regularised system (G + lam·R)⁻¹ per view frequency, (My, Mx, d², d²) complex128,
-        R = diag(``weights``) (My, Mx, d²) in the folded layout (default: the identity); ``lam``
-        is relative to G's largest diagonal. For :meth:`solve`.
+        """The regularised system (G + lam·R)⁻¹ per view frequency q < Mx//2+1 (the others are
+        its conjugates, :meth:`expand`), (My, Mx//2+1, d², d²) complex128, R = diag(``weights``)
+        (My, Mx, d²) in the folded layout (default: the identity; real and even, as every
+        regulariser of a real image); ``lam`` is relative to G's largest diagonal (:attr:`scale`).
+        For :meth:`solve`.
 
         Cholesky factorisation, then the explicit inverse (applying it is one batched d² x d²
         product per solve), in double precision: G's eigenvalues span ~1e-6..1 (float32 would
         lose the small ones). Timings: ``docs/decisions.md``."""
         if not lam > 0:
             raise ValueError(f"lam must be > 0, got {lam}")
-        scale = float(self.matrix.diagonal(dim1=-2, dim2=-1).real.max())
-        a = self.matrix.to(torch.complex128)
+        scale = self.scale
+        a = self.half.to(torch.complex128)
         diag = a.diagonal(dim1=-2, dim2=-1)
         if weights is None:
             diag += lam * scale
         else:
-            diag += (lam * scale) * weights.to(torch.float64)
+            diag += (lam * scale) * weights[:, :a.shape[1]].to(torch.float64)
         chol, info = torch.linalg.cholesky_ex(a)
         del a
         if bool((info != 0).any()):
@@ -112,7 +179,6 @@ class FoldedNormal:
 
     def solve(self, rhs_image, inverse: torch.Tensor) -> torch.Tensor:
         """(AᵀA + lam·R)⁻¹ rhs on the circular domain, with ``inverse`` from :meth:`factor`."""
-        b = self.fold(torch.fft.fft2(torch.as_tensor(rhs_image, dtype=torch.float32,
-                                                     device=self.device)))
+        b = self._folded_half(rhs_image)
         x = torch.matmul(inverse, b.to(torch.complex128).unsqueeze(-1)).squeeze(-1)
-        return torch.fft.ifft2(self.unfold(x.to(torch.complex64))).real
+        return self._image(x.to(torch.complex64))

@@ -203,7 +203,7 @@ class FoldedXStep:
         self.nm, self.data_normal, self.transform = normal, data_normal, transform
         self.floor, self.cg = float(floor), int(cg)
         self.full = bool(mask.all()) and exact
-        self.scale = float(normal.matrix.diagonal(dim1=-2, dim2=-1).real.max())
+        self.scale = normal.scale
         sym = transform.symbol(normal.geometry.domain, normal.device) + self.floor
         self.reg_fold = normal.fold(sym.to(torch.complex64)).real
         self._last: tuple[torch.Tensor, torch.Tensor] | None = None
