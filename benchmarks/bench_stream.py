@@ -19,7 +19,8 @@ bytes (logical and on disk), peak RSS and its ratio to the views, wall and CPU t
 megapixel, the 1-minute load average before and after, and the SSIM of a 4 x 4-tile crop in the
 middle against the tiled truth, next to the middle tile of the 3 x 3-tile capture reconstructed
 in one piece (with the same settings). A full run writes ``results/stream.json`` after each row
-(``"partial": true`` until the last). Measured figures: ``docs/decisions.md``.
+(``"partial": true`` until the last). ``--blocks-sample N`` reconstructs N of the blocks only
+and projects the whole (``bench_stream_sample.py``). Measured figures: ``docs/decisions.md``.
 """
 
 from __future__ import annotations
@@ -192,5 +193,11 @@ def _reconstruct_row(store, out, mode, case, cfg, cap, truth, shape, image_shape
 
 
 if __name__ == "__main__":  # pragma: no cover
+    if "--blocks-sample" in sys.argv:  # a sample of the blocks, projected (bench_stream_sample)
+        from bench_stream_sample import main
+
+        i = sys.argv.index("--blocks-sample")
+        rest = sys.argv[1:i] + sys.argv[i + 2:]
+        raise SystemExit(main(["--blocks", sys.argv[i + 1], *rest]))
     for r in run(quick="--quick" in sys.argv):
         print(r)
