@@ -112,3 +112,23 @@ def test_embed_places_window_samples_and_mask(rng):
     assert not bool(outside.any())
     with pytest.raises(ValueError, match="window"):
         g.embed(s[:, :3])
+
+
+def test_dropped_spectra_are_remade_the_same_and_hqs_drops_them_after_its_set_up(rng):
+    from metasensor.solvers.hqs import HQSOptions, hqs
+    from metasensor.solvers.splitting import Continuation
+
+    psf = _bank(rng, v=6, k=9)
+    g = make_geometry((40, 44), 3, 4)
+    op = PhaseSpaceOperator(psf, g, device="cpu")
+    x = torch.from_numpy(rng.random(g.domain).astype(np.float32))
+    before = op.forward(x)
+    op.drop_spectra()
+    assert op._otf is None
+    torch.testing.assert_close(op.forward(x), before, rtol=0, atol=0)
+    data, mask = g.embed(torch.from_numpy(rng.random((6, 40, 44)).astype(np.float32) + 1))
+    opts = HQSOptions(continuation=Continuation(beta_max=4.0))
+    first = hqs(op, data, mask, opts).estimate
+    assert op._otf is None  # the loop applied the folded AᵀA and the bands only
+    torch.testing.assert_close(hqs(op, data, mask, opts).estimate, first, rtol=0, atol=0)
+    torch.testing.assert_close(op.forward(x), before, rtol=0, atol=0)

@@ -31,6 +31,7 @@ import numpy as np
 import torch
 
 from metasensor.backend import resolve_device
+from metasensor.phasespace.sampling import column_fold, sample_columns
 
 __all__ = ["Geometry", "make_geometry", "PhaseSpaceOperator", "smooth_size"]
 
@@ -143,23 +144,6 @@ def make_geometry(window: tuple[int, int], d: int, radius: int, pad: bool = True
     return Geometry((sy, sx), d, (lead, lead), (my, mx))
 
 
-def _column_fold(geometry: Geometry, device) -> tuple:
-    """Index tensors of the column fold of :meth:`PhaseSpaceOperator.samples_from_folded`: the
-    half-spectrum column k of the samples (k < Mx//2+1) sums the domain's columns k + b·Mx
-    (b < d); those under Nx//2+1 are read directly (``direct``: destination, source), the others
-    as conj(F(−p, Nx − k)) (``source`` columns, ``conj`` destinations, ``flip`` the rows −p)."""
-    d = geometry.d
-    my, mx = geometry.grid
-    nx = geometry.domain[1]
-    nh = nx // 2 + 1
-    dest = torch.arange(mx // 2 + 1, device=device)[:, None].expand(-1, d).flatten()
-    col = (torch.arange(mx // 2 + 1, device=device)[:, None]
-           + mx * torch.arange(d, device=device)[None]).flatten()
-    inside = col < nh
-    flip = torch.remainder(-torch.arange(my, device=device), my)
-    return ((dest[inside], col[inside]), nx - col[~inside], dest[~inside], flip)
-
-
 class GridShapes:
     """``domain_shape`` and ``range_shape`` of a phase-space operator from its ``geometry`` and
     ``n_views`` (shared by every operator on a :class:`Geometry`)."""
@@ -196,7 +180,8 @@ class PhaseSpaceOperator(GridShapes):
     Notes
     -----
     Holds the bank (``psf``, on the device) and its OTFs (complex64 half spectra
-    ``(V, Ny, Nx//2+1)``), computed once. Calls never change the object's state.
+    ``(V, Ny, Nx//2+1)``), computed once (:meth:`drop_spectra` frees them until the next use).
+    Calls never change what the operator computes.
     """
 
     def __init__(self, psf, geometry: Geometry, device=None, chunk: int = 8):
@@ -217,13 +202,27 @@ class PhaseSpaceOperator(GridShapes):
             raise ValueError(f"PSF size {self.k} exceeds the estimate domain {ny}x{nx}")
         self.chunk = max(int(chunk), 1)
         self.psf = psf_t
-        self.otf = self._otfs(psf_t)
+        self._otf = self._otfs(psf_t)
         my, mx = geometry.grid
         self._cols = torch.arange(nx // 2 + 1, device=self.device) % mx
-        self._xfold = _column_fold(geometry, self.device)
+        self._xfold = column_fold(geometry, self.device)
         self.psf_sums = psf_t.sum(dim=(-2, -1))
 
     # ------------------------------------------------------------------ setup
+    @property
+    def otf(self) -> torch.Tensor:
+        """The OTFs, complex64 half spectra ``(V, Ny, Nx//2+1)``: made at construction, freed
+        by :meth:`drop_spectra`, remade (the same values) on the next use."""
+        if self._otf is None:
+            self._otf = self._otfs(self.psf)
+        return self._otf
+
+    def drop_spectra(self) -> None:
+        """Free the OTFs (the operator's largest part, V·Ny·(Nx/2+1)·8 bytes) until the next
+        use remakes them: for a solver that, once set up, applies derived operators only (the
+        HQS loop: the folded AᵀA and the bands' own operators)."""
+        self._otf = None
+
     def _otfs(self, psf: torch.Tensor) -> torch.Tensor:
         """rfft2 of each PSF zero-padded to the domain, centre moved to (0, 0); a pruned
         transform: along x only the K rows that hold the PSF, then along y."""
@@ -262,20 +261,8 @@ class PhaseSpaceOperator(GridShapes):
 
     def samples_from_folded(self, folded: torch.Tensor) -> torch.Tensor:
         """View samples (c, My, Mx) from their row-folded half spectra (c, My, Nx//2+1): the
-        columns folded too (sampling every d-th column: the sum over the d column sub-bands,
-        the half spectrum's missing half from Hermitian symmetry), then inverse transforms at
-        the samples' size (not the domain's, then every d-th column)."""
-        d = self.geometry.d
-        mx = self.geometry.grid[1]
-        direct, source, conj, flip = self._xfold
-        small = torch.zeros((*folded.shape[:-1], mx // 2 + 1), dtype=folded.dtype,
-                            device=folded.device)
-        small.index_add_(-1, direct[0], folded.index_select(-1, direct[1]))
-        if source.numel():
-            part = folded.index_select(-1, source).index_select(-2, flip).conj()
-            small.index_add_(-1, conj, part)
-        rows = torch.fft.ifft(small, dim=-2)  # the sampled rows' half spectra along x
-        return torch.fft.irfft(rows, n=mx, dim=-1) / (d * d)
+        columns sampled in the Fourier domain (:mod:`metasensor.phasespace.sampling`)."""
+        return sample_columns(folded, self._xfold, self.geometry)
 
     def new_conj_accumulator(self) -> torch.Tensor:
         """Zeroed (d, My, Nx//2+1) accumulator for :meth:`backproject_conj`."""

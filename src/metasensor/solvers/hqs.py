@@ -40,6 +40,7 @@ from dataclasses import dataclass
 
 import torch
 
+from metasensor.phasespace.masked_normal import BandNormal
 from metasensor.phasespace.normal import FoldedNormal
 from metasensor.phasespace.operator import PhaseSpaceOperator
 from metasensor.solvers.noise_model import PoissonGaussian, sample_weights
@@ -330,6 +331,8 @@ def hqs(op: PhaseSpaceOperator, y, mask, options: HQSOptions = HQSOptions(), *,
     exact = bool(getattr(op, "normal_is_exact", True))
     smooth = FoldedXStep(nm, data_normal, m, GRADIENT, REG_FLOOR, INIT_CG, exact)
     aty = op.adjoint(yn)
+    if options.noise_model is None and isinstance(data_normal, BandNormal):
+        op.drop_spectra()  # from here on only the folded AᵀA and the bands' operators apply
     x = smooth.at(options.init_reg * smooth.scale)(aty, None)  # the smooth start
     weights, sigma = _noise_weights(op, x, unit, m, options)
     loop_aty = aty
