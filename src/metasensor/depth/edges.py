@@ -149,27 +149,33 @@ def _slopes(views, au, av, ys, xs, lo, hi, normal, tangent, margin, nearest, far
     return sxy, sxx, syy, len(on_line)
 
 
-def _along(values: torch.Tensor, key: torch.Tensor, tangent, length: int,
+def _along(values: torch.Tensor, key: torch.Tensor, ys, xs, shape, tangent, length: int,
            tol: torch.Tensor) -> torch.Tensor:
-    """Moments ``Σ_j j^m · values(p + j · tangent)`` (m = 0, 1, 2; ``(3, C, H, W)``) over the
-    run ``|j| <= length`` of pixels whose ``key (C', H, W)`` matches that of ``p`` within
-    ``tol (H, W)`` (NaN: never), from ``p`` on each side until more than ``GAP`` pixels in a
-    row do not match."""
+    """Moments ``Σ_j j^m · values(p + j · tangent)`` (m = 0, 1, 2; ``(3, C, M)``) at the M
+    pixels ``(ys, xs)`` with ``values (C, M)``, over the run ``|j| <= length`` of those pixels
+    whose ``key (C', M)`` matches that of ``p`` within ``tol (M,)``, from ``p`` on each side
+    until more than ``GAP`` pixels in a row do not match (or the image ends)."""
     ty, tx = tangent
+    h, w = shape
+    index = torch.full((h, w), -1, dtype=torch.long, device=values.device)
+    index[ys, xs] = torch.arange(ys.numel(), device=values.device)
     total = torch.zeros((3, *values.shape), dtype=values.dtype, device=values.device)
     total[0] = values
     for sign in (1, -1):
-        misses = torch.zeros(values.shape[1:], dtype=torch.int32, device=values.device)
+        misses = torch.zeros(ys.shape, dtype=torch.int32, device=values.device)
         for s in range(1, length + 1):
-            sh = (-sign * s * ty, -sign * s * tx)  # brings p + j · tangent to p, j = sign · s
-            match = (torch.roll(key, shifts=sh, dims=(1, 2)) - key).abs().amax(0) <= tol
+            qy, qx = ys + sign * s * ty, xs + sign * s * tx
+            inside = (qy >= 0) & (qy < h) & (qx >= 0) & (qx < w)
+            j_idx = torch.where(inside, index[qy.clamp(0, h - 1), qx.clamp(0, w - 1)], -1)
+            other = j_idx.clamp(min=0)
+            match = (j_idx >= 0) & ((key[:, other] - key).abs().amax(0) <= tol)
             alive = misses <= GAP
             run = match & alive
             misses = torch.where(match, torch.zeros_like(misses), misses + 1)
             misses = torch.where(alive, misses, torch.full_like(misses, GAP + 1))
             if not bool(alive.any()):
                 break
-            other_v = torch.roll(values, shifts=sh, dims=(1, 2)) * run[None]
+            other_v = values[:, other] * run[None]
             j = float(sign * s)
             total[0] += other_v
             total[1] += j * other_v
@@ -194,10 +200,10 @@ def _common_slope(mom: torch.Tensor, k: int):
     return a, (rss.clamp(min=0) / dof * var_a).sqrt()
 
 
-def _coverage(part, prof, tangent, length: int, tol, k: int, ys, xs):
-    """The front coverage at the pixels ``(ys, xs)`` from the sums ``part`` of
+def _coverage(part, prof, tangent, length: int, tol, k: int, ys, xs, shape):
+    """The front coverage at the pixels ``(ys, xs)`` from their sums ``part (6, M)`` of
     :func:`_one_pass` over their runs along ``tangent``: ``(f, standard error, defined)``."""
-    mom = _along(part, prof, tangent, length, tol)[:, :, ys, xs]
+    mom = _along(part, prof, ys, xs, shape, tangent, length, tol)
     slope, se = _common_slope(mom, k)
     # the background's own slope against its estimate (1 but for the estimate's blur)
     rxy, rxx = mom[0, 4], mom[0, 5]
@@ -261,23 +267,22 @@ def _one_pass(views, au, av, disp, opts: EdgeSnap, amax: float, allowed=None):
         # the values a re-decided pixel takes: its neighbours' across the edge where labelled so
         to_val[0, ys, xs] = front
         to_val[1, ys, xs] = torch.where(ref_ok > 0, disp[ry, rx], hi[ys, xs])
-        part = torch.zeros((6, h, w), dtype=disp.dtype, device=disp.device)
-        sxy, sxx, syy, k = _slopes(views, au, av, ys, xs, *args)
-        part[0, ys, xs], part[1, ys, xs], part[2, ys, xs] = sxy, sxx, syy
-        part[3, ys, xs] = 1.0
+        part = torch.zeros((6, ys.numel()), dtype=disp.dtype, device=disp.device)
+        part[0], part[1], part[2], k = _slopes(views, au, av, ys, xs, *args)
+        part[3] = 1.0
         rxy, rxx, _, _ = _slopes(views, au, av, ry, rx, *args)
-        part[4, ys, xs], part[5, ys, xs] = rxy * ref_ok, rxx * ref_ok
+        part[4], part[5] = rxy * ref_ok, rxx * ref_ok
         # runs along the edge: the same layers (to a quarter of their gap) and the same labels
         # on either side of the edge (a straight stretch)
-        prof = torch.full((4, h, w), float("nan"), dtype=disp.dtype, device=disp.device)
         lo_p, hi_p = lo[ys, xs], hi[ys, xs]
-        prof[0, ys, xs], prof[1, ys, xs] = lo_p, hi_p
+        prof = torch.stack([lo_p, hi_p, lo_p, lo_p])
         for c, side in ((2, -1), (3, 1)):
             dq = disp[(ys + side * iy).clamp(0, h - 1), (xs + side * ix).clamp(0, w - 1)]
-            prof[c, ys, xs] = ((dq - lo_p).abs() < (dq - hi_p).abs()).to(disp.dtype) * 1e6
-        f, se, ok = _coverage(part, prof, tangent_of[s], opts.length, tol, k, ys, xs)
+            prof[c] = ((dq - lo_p).abs() < (dq - hi_p).abs()).to(disp.dtype) * 1e6
+        run = (part, prof, tangent_of[s])
+        f, se, ok = _coverage(*run, opts.length, tol[ys, xs], k, ys, xs, (h, w))
         if opts.long_length > opts.length:  # a long straight stretch, where it agrees
-            f2, se2, ok2 = _coverage(part, prof, tangent_of[s], opts.long_length, tol, k, ys, xs)
+            f2, se2, ok2 = _coverage(*run, opts.long_length, tol[ys, xs], k, ys, xs, (h, w))
             use = ok2 & (~ok | ((f2 - f).abs() <= se))
             f, se, ok = torch.where(use, f2, f), torch.where(use, se2, se), ok | ok2
         sure = ok & ((f - 0.5).abs() >= opts.certainty * se)
