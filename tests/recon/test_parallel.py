@@ -102,3 +102,29 @@ def test_local_workers_split_the_torch_threads_and_give_them_back():
         assert seen == [2, 2]
     finally:
         torch.set_num_threads(before)
+
+
+def test_two_local_workers_never_set_up_two_blocks_at_once(capture):
+    # Each block's set-up (bank, operator, solver set-up) holds a gate until its solver's first
+    # step: the banks of two workers are never made at the same time (their memory peaks would
+    # add up), and the image is the one of a single worker.
+    import threading
+    import time
+
+    views, _, bank = capture
+    lock, active, most = threading.Lock(), [0], [0]
+
+    def psf_fn(cfg, zernike, device):
+        with lock:
+            active[0] += 1
+            most[0] = max(most[0], active[0])
+        time.sleep(0.3)
+        with lock:
+            active[0] -= 1
+        return bank
+
+    kw = dict(psf_fn=psf_fn, blocks=(2, 2), overlap=8, view_radius=2.5, solver="rl",
+              iterations=2)
+    two = reconstruct(views, CFG, num_workers=2, **kw)
+    assert most[0] == 1
+    np.testing.assert_array_equal(two.image, reconstruct(views, CFG, **kw).image)

@@ -237,6 +237,7 @@ def _solver_options(opts: ReconOptions, solver: str, n_views: int, step: int, no
 
 def _tasks(views, cfg: SystemConfig, method: str, grid, zern, opts: ReconOptions, plan: dict):
     """One keyword-built :class:`BlockTask` per block."""
+    import threading
     from dataclasses import replace
 
     from metasensor.dao.estimate import DaoOptions
@@ -244,6 +245,7 @@ def _tasks(views, cfg: SystemConfig, method: str, grid, zern, opts: ReconOptions
     dao = None if method == "isa" else replace(opts.dao or DaoOptions(), method=method)
     local = opts.scheduler is None or opts.scheduler in ("threads", "sync")
     ship = not local and isinstance(views, np.ndarray)  # a cluster gets windows, not the stack
+    gate = threading.Semaphore(1) if local and (opts.num_workers or 1) > 1 else None
     d = cfg.scan_step_px
     out = []
     for b in plan["blocks"]:
@@ -253,7 +255,7 @@ def _tasks(views, cfg: SystemConfig, method: str, grid, zern, opts: ReconOptions
             uv=plan["uv"], zernike=zern[b.index], solver=plan["solver"], dao=dao, psf=opts.psf,
             psf_fn=opts.psf_fn, register=bool(opts.register), pad=opts.pad,
             dao_negligible=float(opts.dao_negligible or 0.0),
-            probe_samples=int(opts.dao_probe_samples),
+            probe_samples=int(opts.dao_probe_samples), setup_gate=gate,
             device=plan["device"], windowed=ship, progress=plan["tick"] if local else None,
             corner_zernike=None if plan["corners"] is None else plan["corners"][b.index]))
     return out

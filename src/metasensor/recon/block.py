@@ -50,6 +50,9 @@ class BlockTask:
     probe_samples : int
         With ``dao_negligible``: view samples per side of the sub-window the probe decides on
         (:func:`probe_window`); windows no larger are probed whole.
+    setup_gate : threading.Semaphore or None
+        Local runs of several blocks at once: held from the block's start to its solver's
+        first step, so that no two blocks build their spectra at once (their peaks add up).
     """
 
     block: Block
@@ -69,6 +72,7 @@ class BlockTask:
     corner_zernike: np.ndarray | None = None  # (4, J): the space-variant model's field points
     dao_negligible: float = 0.0
     probe_samples: int = PROBE_SAMPLES
+    setup_gate: Any = None
 
 
 @dataclass
@@ -261,8 +265,32 @@ def _operator(task: BlockTask, psf: np.ndarray, data_win: np.ndarray):
     return PhaseSpaceOperator(psf, geometry, device=task.device), [], None
 
 
+class _Release:
+    """Releases ``gate`` once (at the solver's first step, or when the block ends)."""
+
+    def __init__(self, gate) -> None:
+        self.gate = gate
+
+    def __call__(self, *_) -> None:
+        gate, self.gate = self.gate, None
+        if gate is not None:
+            gate.release()
+
+
 def reconstruct_block(task: BlockTask) -> BlockResult:
-    """Window → bank → optional registration → solve (module docstring) for one block."""
+    """Window → bank → optional registration → solve (module docstring) for one block (its
+    set-up under ``task.setup_gate``, when given)."""
+    if task.setup_gate is None:
+        return _reconstruct(task, None)
+    task.setup_gate.acquire()
+    release = _Release(task.setup_gate)
+    try:
+        return _reconstruct(task, release)
+    finally:
+        release()
+
+
+def _reconstruct(task: BlockTask, started) -> BlockResult:
     cfg = task.cfg
     window = _window(task)
     rows, cols = [u for u, _ in task.uv], [v for _, v in task.uv]
@@ -272,7 +300,7 @@ def reconstruct_block(task: BlockTask) -> BlockResult:
         op, registration, reg_zernike = space_variant_operator(task, window[rows, cols], rows,
                                                                cols)
         return _solve(task, op, window[rows, cols], np.asarray(task.zernike, np.float32), [],
-                      registration, reg_zernike)
+                      registration, reg_zernike, started=started)
     bank, zernike, dao_history, estimate = _bank(task, window)
     bank = np.asarray(bank, dtype=np.float32)
     if bank.ndim != 4 or bank.shape[:2] != (cfg.nnum, cfg.nnum):
@@ -280,19 +308,26 @@ def reconstruct_block(task: BlockTask) -> BlockResult:
                          f"got {bank.shape}")
     op, registration, reg_zernike = _operator(task, bank[rows, cols], window[rows, cols])
     return _solve(task, op, window[rows, cols], zernike, dao_history, registration, reg_zernike,
-                  estimate)
+                  estimate, started)
 
 
 def _solve(task: BlockTask, op, data_win: np.ndarray, zernike, dao_history, registration,
-           reg_zernike, estimate=None) -> BlockResult:
+           reg_zernike, estimate=None, started=None) -> BlockResult:
     """Solve the block on ``op`` and cut its region out of the estimate (``estimate``: DAO's,
-    applied when it is ``zernike`` itself)."""
+    applied when it is ``zernike`` itself; ``started``: called at the solver's every step)."""
     import torch
 
     from metasensor.solvers import solve
 
+    progress = task.progress
+    if started is not None:
+        def progress(n: int, inner=task.progress) -> None:
+            started()
+            if inner is not None:
+                inner(n)
+
     data, mask = op.geometry.embed(torch.from_numpy(data_win).to(op.device))
-    result = solve(op, data, mask, task.solver, progress=task.progress)
+    result = solve(op, data, mask, task.solver, progress=progress)
     image = op.geometry.crop(result.estimate).detach().cpu().numpy()
     ry, rx = task.block.region_in_window()
     return BlockResult(task.block, np.ascontiguousarray(image[ry, rx], dtype=np.float32),
