@@ -113,3 +113,14 @@ def test_frequency_floor_is_the_lowest_bin_read():
     truth = rng.random((56, 56))
     flat = np.full_like(truth, truth.mean())
     assert resolved_frequency(flat, truth) < frequency_floor(truth.shape)
+
+
+def test_gigapixel_simulates_on_a_finer_field_grid_than_it_reconstructs():
+    from metasensor.scenarios.gigapixel import GigapixelSettings
+
+    s = GigapixelSettings()
+    # the reconstruction's banks sit at the blocks' corners: blocks + 1 per axis
+    assert all(sb > b + 1 for sb, b in zip(s.sim_blocks, s.blocks, strict=True))
+    for bad in ((0, 4), (4,), [4, 4], (4.0, 4)):
+        with pytest.raises(ValueError, match="sim_blocks"):
+            GigapixelSettings(sim_blocks=bad)

@@ -73,6 +73,46 @@ def test_hyper_laplacian_prox_is_the_closed_form_w_step():
         HyperLaplacian(0.5)
 
 
+def test_isotropic_prox_shrinks_the_gradient_magnitude_along_its_direction():
+    # prox(z, 1/β) of Σ_p |∇x(p)|^α: alpha = 1 is the vector soft threshold exactly; 2/3 the
+    # scalar closed form on |z(p)| with z(p)'s direction; both commute with rotations
+    rng = np.random.default_rng(1)
+    z = torch.from_numpy(rng.normal(0, 0.3, (2, 3, 40, 30)))  # a batch of three images
+    rho = torch.sqrt(z[0] ** 2 + z[1] ** 2)
+    tv = HyperLaplacian(1.0, isotropic=True).prox(z, 1 / 8.0)
+    ref = z * torch.clamp(1 - 1 / (8.0 * rho), min=0)
+    assert float((tv - ref).abs().max()) < 1e-12
+    got = HyperLaplacian(isotropic=True).prox(z, 1 / 8.0)
+    mag = torch.sqrt(got[0] ** 2 + got[1] ** 2)
+    from metasensor.solvers.hyper_laplacian import _threshold_two_thirds
+
+    vt = _threshold_two_thirds(8.0)
+    for b in range(3):
+        # the closed form jumps at the threshold: the table may put an element within one
+        # table step of it on either side
+        away = (rho[b] - vt).abs() > 2 * float(rho[b].max()) / (1 << 14)
+        err = (mag[b] - solve_w(rho[b], 8.0, 2 / 3)).abs()[away]
+        assert float(err.max()) < 2e-4 * float(rho[b].max())
+    cross = got[0] * z[1] - got[1] * z[0]  # parallel to z
+    assert float(cross.abs().max()) < 1e-9
+    c, s_ = np.cos(0.6), np.sin(0.6)
+    rot = torch.stack([c * z[0] - s_ * z[1], s_ * z[0] + c * z[1]])
+    out = HyperLaplacian(isotropic=True).prox(rot, 1 / 8.0)
+    back = torch.stack([c * got[0] - s_ * got[1], s_ * got[0] + c * got[1]])
+    assert float((out - back).abs().max()) < 2e-3 * float(rho.max())
+    aniso = HyperLaplacian().prox(rot, 1 / 8.0)
+    assert float((aniso - back).abs().max()) > 0.05 * float(rho.max())  # it is not isotropic
+    with pytest.raises(TypeError, match="isotropic"):
+        HyperLaplacian(isotropic=1)
+
+
+def test_solvers_default_to_the_isotropic_prior():
+    from metasensor.solvers.krishnan_fergus import KFOptions
+
+    assert HQSOptions().prior == HyperLaplacian(isotropic=True)
+    assert KFOptions().isotropic is True
+
+
 def test_options_refuse_what_is_not_a_prior():
     with pytest.raises(TypeError, match="prior"):
         HQSOptions(prior=object())

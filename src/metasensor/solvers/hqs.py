@@ -6,14 +6,14 @@ measurement ``A`` of :class:`metasensor.phasespace.operator.PhaseSpaceOperator`:
 
     min_x  (λ/2)·‖A x − y‖²_M  +  R(L x)
 
-with the loop of :func:`metasensor.solvers.splitting.half_quadratic_splitting` and a pluggable
-prior (:mod:`metasensor.solvers.priors`; default the hyper-Laplacian ``Σ |∇x|^(2/3)``). The
-x-step (:class:`FoldedXStep`) is exact on a fully observed (circular) domain: AᵀA is
-block-diagonal in the Fourier domain (:class:`metasensor.phasespace.normal.FoldedNormal`), and so
-is LᵀL, so it costs two FFTs and a batched d² x d² product with the system's inverse (factored
-once per β). Unobserved samples (the padded margins of a window) make it non-circular: it is then
-solved by conjugate gradients preconditioned with the circular solve, warm-started from the
-previous x, with the masked normal product of :mod:`metasensor.phasespace.masked_normal`.
+with the loop of :func:`metasensor.solvers.splitting.half_quadratic_splitting` and a pluggable prior
+(:mod:`metasensor.solvers.priors`; default the isotropic hyper-Laplacian ``Σ_p |∇x(p)|^(2/3)``). The
+x-step (:class:`FoldedXStep`) is exact on a fully observed (circular) domain: AᵀA is block-diagonal
+in the Fourier domain (:class:`metasensor.phasespace.normal.FoldedNormal`), and so is LᵀL, so it
+costs two FFTs and a batched d² x d² product with the system's inverse (factored once per β).
+Unobserved samples (the padded margins of a window) make it non-circular: it is then solved by
+conjugate gradients preconditioned with the circular solve, warm-started from the previous x, with
+the masked normal product of :mod:`metasensor.phasespace.masked_normal`.
 
 Units and λ: the image is normalised to mean 0.5 (``x_n = x / (2·mean)``, the mean from the
 data and the operator's sensitivity) and the prior sees it so. Unless given, λ =
@@ -63,7 +63,8 @@ class HQSOptions:
     Attributes
     ----------
     prior : Prior
-        The image prior (:mod:`metasensor.solvers.priors`); default the hyper-Laplacian, alpha 2/3.
+        The image prior (:mod:`metasensor.solvers.priors`); default the isotropic
+        hyper-Laplacian (gradient magnitude), alpha 2/3.
     lam : float or None
         λ, the data weight on the mean-0.5 image; None: from the noise and the model error
         (module docstring).
@@ -86,7 +87,7 @@ class HQSOptions:
         Smoothness weight of the start, relative to AᵀA's largest diagonal (default 1e-2).
     """
 
-    prior: Prior = HyperLaplacian()
+    prior: Prior = HyperLaplacian(isotropic=True)
     lam: float | None = None
     lam_scale: float = 0.3
     noise: float | None = None

@@ -90,7 +90,7 @@ class FourierXStep:
 
 
 def kf_deconv(y: torch.Tensor, otf: torch.Tensor, lam: float = DEFAULT_LAMBDA,
-              prior: Prior = HyperLaplacian(), betas: list[float] | None = None,
+              prior: Prior = HyperLaplacian(isotropic=True), betas: list[float] | None = None,
               inner: int = 1) -> torch.Tensor:
     """Tensor core of :func:`hyper_laplacian_deconv` (used by DAO).
 
@@ -139,6 +139,9 @@ class KFOptions:
         Border added before the FFTs (default: the kernel's half size + 4).
     normalize_kernel : bool
         Scale kernels to unit sum (default True).
+    isotropic : bool
+        Penalise the gradient's magnitude (default True, as the phase-space HQS) rather than
+        each component (:class:`~metasensor.solvers.priors.HyperLaplacian`).
     """
 
     lam: float = DEFAULT_LAMBDA
@@ -147,11 +150,12 @@ class KFOptions:
     inner: int = 1
     pad: int | None = None
     normalize_kernel: bool = True
+    isotropic: bool = True
 
     def __post_init__(self) -> None:
         if not (isinstance(self.lam, int | float) and self.lam > 0 and math.isfinite(self.lam)):
             raise ValueError(f"lam must be positive and finite, got {self.lam!r}")
-        HyperLaplacian(self.alpha)  # validates alpha
+        HyperLaplacian(self.alpha, isotropic=self.isotropic)  # validates alpha, isotropic
         if self.inner < 1:
             raise ValueError(f"inner must be >= 1, got {self.inner}")
 
@@ -213,7 +217,7 @@ def hyper_laplacian_deconv(images, kernels, options: KFOptions | None = None, *,
     scale = scale64.to(y.dtype)
     yp = pad_fade((y64 / scale64).to(y.dtype), pad)
     otf = psf2otf(k, yp.shape[-2:])
-    x = kf_deconv(yp, otf, lam=lam, prior=HyperLaplacian(opts.alpha),
+    x = kf_deconv(yp, otf, lam=lam, prior=HyperLaplacian(opts.alpha, isotropic=opts.isotropic),
                   betas=opts.continuation.betas(), inner=opts.inner)
     h, w = y.shape[-2:]
     x = x[..., pad:pad + h, pad:pad + w] * scale

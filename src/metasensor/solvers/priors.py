@@ -113,23 +113,42 @@ IDENTITY = Identity()
 
 @dataclass(frozen=True)
 class HyperLaplacian:
-    """``R(∇x) = Σ_i |(∇x)_i|^alpha``, alpha 2/3 (default) or 1 (total variation): the
-    sparse-gradient prior of natural images (Krishnan & Fergus 2009).
+    """The sparse-gradient prior of natural images (Krishnan & Fergus 2009), alpha 2/3
+    (default) or 1 (total variation): anisotropic ``R(∇x) = Σ_p Σ_i |(∇x)_i(p)|^alpha`` (each
+    gradient component on its own), or with ``isotropic`` ``R(∇x) = Σ_p |∇x(p)|^alpha`` (the
+    gradient's magnitude; no preferred axis, so edges are not drawn as steps along the pixel
+    axes).
 
     ``prox`` is exact for alpha = 1 (soft threshold) and tabulated for 2/3 (the lookup table of
     :func:`metasensor.solvers.hyper_laplacian.solve_w_table`, one table per gradient component
     of every image of a batch ``(2, ..., H, W)``, so a batch gives its images' own results).
+    The isotropic prox is the scalar one applied to the magnitude ``|z(p)|`` with ``z(p)``'s
+    direction kept (the minimiser of a radial penalty plus ``½‖w − z‖²`` lies along ``z``).
     """
 
     alpha: float = 2.0 / 3.0
     transform: Gradient = GRADIENT
+    isotropic: bool = False
 
     def __post_init__(self) -> None:
         if not isinstance(self.alpha, int | float) or (
                 self.alpha != 1.0 and abs(self.alpha - 2.0 / 3.0) > 1e-9):
             raise ValueError(f"alpha must be 2/3 or 1, got {self.alpha!r}")
+        if not isinstance(self.isotropic, bool):
+            raise TypeError(f"isotropic must be True or False, got {self.isotropic!r}")
 
     def prox(self, z: torch.Tensor, weight: float) -> torch.Tensor:
         beta = 1.0 / float(weight)
-        flat = z.reshape(-1, *z.shape[-2:])
-        return torch.stack([solve_w_table(c, beta, self.alpha) for c in flat]).reshape(z.shape)
+        if not self.isotropic:
+            flat = z.reshape(-1, *z.shape[-2:])
+            return torch.stack([solve_w_table(c, beta, self.alpha)
+                                for c in flat]).reshape(z.shape)
+        if z.shape[0] != 2:
+            raise ValueError(f"the isotropic prox needs gradients (2, ..., H, W), got {z.shape}")
+        pairs = z.reshape(2, -1, *z.shape[-2:])
+        out = torch.empty_like(pairs)
+        for b in range(pairs.shape[1]):
+            rho = torch.sqrt(pairs[0, b] ** 2 + pairs[1, b] ** 2)
+            scale = solve_w_table(rho, beta, self.alpha) / rho.clamp_min(1e-30)
+            out[:, b] = pairs[:, b] * scale
+        return out.reshape(z.shape)
