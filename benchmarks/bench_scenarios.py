@@ -33,10 +33,10 @@ Rows:
   fraction of samples the gated estimate moves, and the registration's CPU seconds per view.
 - ``telescope-strong`` (``--telescope-strong`` alone): the telescope demo at D/r0 = 15.
 
-The ``plastic-wrap`` row runs the demo on a 720-px field (:data:`WRAP_BENCH`; the demo's is
-240 px): 4 x 4 regions of 180 px, whose spectra read down to 0.0056 cycles/px, so a 2D sensor
-blurred over tens of pixels is measured rather than floored, and bar groups up to 20 px at every
-location (the chart's layout packs 40-px groups only into fields of about 1,300 px).
+The ``plastic-wrap`` row runs the demo on a 480-px field (:data:`WRAP_BENCH`; the demo's is
+240 px): 4 x 4 regions of 112 px, whose spectra read down to 0.009 cycles/px (56-px regions:
+0.018), and bar groups up to 12 px at every location (the chart's layout packs 40-px groups only
+into fields of about 1,300 px, beyond this machine's time for the row).
 ``python benchmarks/bench_scenarios.py --plastic-wrap [--quick]`` runs it alone.
 
 ``python benchmarks/bench_scenarios.py --telescope [--quick] [--no-simulation]`` runs the four
@@ -184,9 +184,9 @@ def _cluster_row() -> dict:
     return {"case": "stitch-cluster", "max_abs_diff": diff, "ok": diff <= 1e-5}
 
 
-#: the plastic-wrap row's field (the demo's is 240 px): large enough for 180-px regions, whose
-#: spectra read down to 0.0056 cycles/px, and bar groups up to 20 px at every location
-WRAP_BENCH = {"size": 720, "blocks": (4, 4), "grid": (4, 4)}
+#: the plastic-wrap row's field (the demo's is 240 px): 112-px regions, whose spectra read down
+#: to 0.009 cycles/px, and bar groups up to 12 px at every location
+WRAP_BENCH = {"size": 480, "blocks": (4, 4), "grid": (4, 4)}
 
 
 def _scenario_rows(quick: bool, names=("plastic-wrap", "telescope", "gigapixel")) -> list[dict]:
