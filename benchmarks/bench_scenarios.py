@@ -216,7 +216,8 @@ def summary_row(s: dict) -> dict:
                     "ssim": {r["sensor"]: r["ssim"] for r in s["table"]},
                     "wrap_spread": s["wrap"]["spread_pupil_diameters"],
                     "block_variation_waves": s["wrap"]["block_variation_waves"],
-                    "dao_error_waves_per_block": s.get("dao_error_waves_per_block")})
+                    "dao_error_waves_per_block": s.get("dao_error_waves_per_block"),
+                    "stage_cpu_seconds": s.get("stage_cpu_seconds")})
     elif name == "telescope":
         row.update({"pupil_error": s["pupil"]["error"],
                     "residual_max_waves": s["residual_max_waves"],

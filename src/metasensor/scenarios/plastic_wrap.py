@@ -21,6 +21,7 @@ it does not touch).
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -179,17 +180,21 @@ def run_plastic_wrap(out: str | Path, settings: PlasticWrapSettings | None = Non
         cfg = ms.SystemConfig()
         scene, depth, box = near_object_scene(s.size, s.near_depth, s.chart)
         fz = s.wrap.field_zernike()
+        cpu = [time.process_time()]
         cap = ms.simulate(scene, cfg, field_zernike=fz, depth=depth, snr_db=s.snr_db, seed=s.seed,
                           field_blocks=s.blocks)
         lf = ms.simulate(scene, cfg, scan=1, field_zernike=fz, depth=depth,
                          snr_db=s.snr_db, seed=s.seed + 1, comparison=False, field_blocks=s.blocks)
         steps.update()
+        cpu.append(time.process_time())
         views = ms.realign(cap.frames, cap.config, cap.scan_order)
         rec = ms.reconstruct(views, cap.config, method="wave", blocks=s.blocks,
                              iterations=s.iterations)
         steps.update()
+        cpu.append(time.process_time())
         rec_lf = ms.reconstruct(lf.views, lf.config, blocks=s.blocks, solver="rl")
         steps.update()
+        cpu.append(time.process_time())
         images = {"2D sensor": cap.sensor2d, "plain light field": rec_lf.image,
                   "meta-imaging + DAO": np.asarray(rec.image)}
         truths = {"2D sensor": cap.truth, "plain light field": lf.truth,
@@ -225,6 +230,9 @@ def run_plastic_wrap(out: str | Path, settings: PlasticWrapSettings | None = Non
             "true_rms_waves_per_block": np.sqrt((true_z[..., 3:] ** 2).sum(-1)),
             "dao_error_waves_per_block": _dao_error(true_z, np.asarray(rec.zernike)),
             "estimated_defocus_waves_per_block": np.asarray(rec.zernike)[..., 3],
+            "stage_cpu_seconds": dict(zip(("simulation", "meta-imaging reconstruction",
+                                           "light-field reconstruction"), np.diff(cpu).tolist(),
+                                          strict=True)),
             "settings": {"size": s.size, "chart": s.chart, "blocks": s.blocks, "snr_db": s.snr_db,
                          "near_depth_m": s.near_depth, "seed": s.seed},
         }
