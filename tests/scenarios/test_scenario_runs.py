@@ -124,3 +124,27 @@ def test_gigapixel_simulates_on_a_finer_field_grid_than_it_reconstructs():
     for bad in ((0, 4), (4,), [4, 4], (4.0, 4)):
         with pytest.raises(ValueError, match="sim_blocks"):
             GigapixelSettings(sim_blocks=bad)
+
+
+def test_wrap_gains_floor_unresolved_regions_and_flag_the_bound():
+    from metasensor.scenarios.plastic_wrap import _dao_error, _gains
+
+    two_d = np.array([[0.0, 0.02], [0.03, 0.04]])
+    meta = np.array([[0.18, 0.16], [0.15, 0.12]])
+    rows = [{"sensor": "2D sensor", "resolved_near_object_cpp": 0.03,
+             "resolved_chart_cpp": 0.03},
+            {"sensor": "meta-imaging + DAO", "resolved_near_object_cpp": 0.1,
+             "resolved_chart_cpp": 0.125}]
+    g = _gains(rows, {"2D sensor": two_d, "meta-imaging + DAO": meta}, {}, floor=0.018)
+    assert g["gain_at_2d_worst"] == pytest.approx(0.18 / 0.018)
+    assert g["gain_at_2d_worst_is_lower_bound"] and g["floor_cpp"] == 0.018
+    assert g["gain_mean"] == pytest.approx(np.mean([10.0, 8.0, 5.0, 3.0]))
+    assert g["near_over_chart_meta"] == pytest.approx(0.8)
+    measured = _gains(rows, {"2D sensor": two_d + 0.01, "meta-imaging + DAO": meta}, {}, 0.018)
+    assert not measured["gain_at_2d_worst_is_lower_bound"]
+    truth = np.zeros((2, 2, 45))
+    truth[..., 3] = 1.0
+    est = truth.copy()
+    est[0, 0, 4] = 0.3
+    assert np.allclose(_dao_error(truth, est), [[0.3, 0], [0, 0]])
+    assert _dao_error(truth, est[:1]) is None
