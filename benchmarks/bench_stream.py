@@ -92,15 +92,13 @@ def _du(path: Path) -> int:
     return sum(f.stat().st_size for f in path.rglob("*") if f.is_file())
 
 
-def run(quick: bool = False) -> list[dict]:
-
+def tiled_capture(cfg):
+    """The astronaut tiled 3 x 3, simulated at 30 dB and noise-free; returns the noisy capture,
+    the clean views, the noise's (gain, variance floor) fitted against the clean views (DN², the
+    floor at least the quantisation's 1/12) and the noise's r.m.s. (DN)."""
     import metasensor as ms
-    from metasensor.sensor.realign import lenslet_counts
     from metasensor.simulation.scenes import load_scene
 
-    case = QUICK if quick else FULL
-    cfg = ms.SystemConfig()
-    d = cfg.scan_step_px
     scene = np.tile(load_scene("astronaut", TILE_PX), (3, 3))
     cap = ms.simulate(scene, cfg, snr_db=30.0, seed=0, comparison=False)
     clean = ms.simulate(scene, cfg, seed=0, comparison=False).views
@@ -108,7 +106,18 @@ def run(quick: bool = False) -> list[dict]:
     var = np.linalg.lstsq(np.stack([clean.ravel(), np.ones(clean.size)], 1), resid2,
                           rcond=None)[0]
     var = (max(float(var[0]), 0.0), max(float(var[1]), 1.0 / 12.0))
-    sigma = float(np.sqrt(resid2.mean()))
+    return cap, clean, var, float(np.sqrt(resid2.mean()))
+
+
+def run(quick: bool = False) -> list[dict]:
+
+    import metasensor as ms
+    from metasensor.sensor.realign import lenslet_counts
+
+    case = QUICK if quick else FULL
+    cfg = ms.SystemConfig()
+    d = cfg.scan_step_px
+    cap, clean, var, sigma = tiled_capture(cfg)
     t = TILE_PX // d  # view samples per tile
     clean = clean[:, :, t:2 * t, t:2 * t]
     truth = cap.truth[TILE_PX:2 * TILE_PX, TILE_PX:2 * TILE_PX]

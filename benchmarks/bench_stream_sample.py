@@ -128,23 +128,16 @@ def run(quick: bool = False, blocks: int | None = None, threads: int | None = No
     from metasensor.recon.blocks import split_blocks
     from metasensor.recon.options import ReconOptions
     from metasensor.sensor.realign import lenslet_counts
-    from metasensor.simulation.scenes import load_scene
 
     case = bs.QUICK if quick else bs.FULL
     n_sample = blocks if blocks is not None else (1 if quick else 3)
     cfg = ms.SystemConfig()
     d = cfg.scan_step_px
-    scene = np.tile(load_scene("astronaut", bs.TILE_PX), (3, 3))
-    cap = ms.simulate(scene, cfg, snr_db=30.0, seed=0, comparison=False)
-    clean = ms.simulate(scene, cfg, seed=0, comparison=False).views
-    resid2 = ((cap.views - clean) ** 2).ravel()
-    var = np.linalg.lstsq(np.stack([clean.ravel(), np.ones(clean.size)], 1), resid2,
-                          rcond=None)[0]
-    var = (max(float(var[0]), 0.0), max(float(var[1]), 1.0 / 12.0))
+    cap, clean, var, _ = bs.tiled_capture(cfg)
     t = bs.TILE_PX // d
     truth = cap.truth[bs.TILE_PX:2 * bs.TILE_PX, bs.TILE_PX:2 * bs.TILE_PX]
     clean = clean[:, :, t:2 * t, t:2 * t]
-    del cap, resid2
+    del cap
     shape = tuple(n * cfg.scan for n in lenslet_counts(case["sensor"], cfg))
     grid = tuple(int(v) for v in case["blocks"].split("x"))
     all_blocks = split_blocks((shape[0] * d, shape[1] * d), grid, d,

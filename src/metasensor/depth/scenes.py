@@ -85,6 +85,20 @@ def _layers(kind: str, shape, span: float, d: int, seed: int) -> list[Layer]:
     raise ValueError(f"scene must be one of {SCENES}, got {kind!r}")
 
 
+def _render_grid(nnum, size, max_disparity):
+    """Checked arguments of a rendered scene -> (config: scan 1, image pixels per view sample,
+    image shape)."""
+    if not (isinstance(nnum, int) and nnum % 2 == 1 and 5 <= nnum <= 15):
+        raise ValueError(f"nnum must be an odd integer in [5, 15], got {nnum!r}")
+    if not (isinstance(size, int) and size >= 32):
+        raise ValueError(f"size must be an integer >= 32, got {size!r}")
+    if not (np.isfinite(max_disparity) and max_disparity > 0):
+        raise ValueError(f"max_disparity must be positive, got {max_disparity!r}")
+    cfg = SystemConfig(nnum=nnum, scan=1)
+    d = cfg.scan_step_px
+    return cfg, d, (size * d, size * d)
+
+
 def benchmark_scene(kind: str, nnum: int = 9, size: int = 128, max_disparity: float = 3.0,
                     snr_db: float | None = 40.0, seed: int = 0) -> SyntheticViews:
     """Render one hard scene for a plain light-field camera (``SystemConfig(nnum, scan=1)``).
@@ -108,15 +122,7 @@ def benchmark_scene(kind: str, nnum: int = 9, size: int = 128, max_disparity: fl
     """
     if kind not in SCENES:
         raise ValueError(f"scene must be one of {SCENES}, got {kind!r}")
-    if not (isinstance(nnum, int) and nnum % 2 == 1 and 5 <= nnum <= 15):
-        raise ValueError(f"nnum must be an odd integer in [5, 15], got {nnum!r}")
-    if not (isinstance(size, int) and size >= 32):
-        raise ValueError(f"size must be an integer >= 32, got {size!r}")
-    if not (np.isfinite(max_disparity) and max_disparity > 0):
-        raise ValueError(f"max_disparity must be positive, got {max_disparity!r}")
-    cfg = SystemConfig(nnum=nnum, scan=1)
-    d = cfg.scan_step_px
-    shape = (size * d, size * d)
+    cfg, d, shape = _render_grid(nnum, size, max_disparity)
     layers = [Layer(lay.alpha, np.asarray(lay.disparity) * d if not np.isscalar(lay.disparity)
                     else float(lay.disparity) * d, lay.texture)
               for lay in _layers(kind, shape, float(max_disparity), d, seed)]
@@ -174,15 +180,7 @@ def natural_scene(nnum: int = 9, size: int = 128, max_disparity: float = 3.0,
     ``nnum`` views, scan 1, additive noise at ``snr_db``). Parameters and return value as for
     :func:`benchmark_scene`; ``seed`` picks the photographs, shapes, disparities and noise.
     """
-    if not (isinstance(nnum, int) and nnum % 2 == 1 and 5 <= nnum <= 15):
-        raise ValueError(f"nnum must be an odd integer in [5, 15], got {nnum!r}")
-    if not (isinstance(size, int) and size >= 32):
-        raise ValueError(f"size must be an integer >= 32, got {size!r}")
-    if not (np.isfinite(max_disparity) and max_disparity > 0):
-        raise ValueError(f"max_disparity must be positive, got {max_disparity!r}")
-    cfg = SystemConfig(nnum=nnum, scan=1)
-    d = cfg.scan_step_px
-    shape = (size * d, size * d)
+    cfg, d, shape = _render_grid(nnum, size, max_disparity)
     rng = np.random.default_rng(seed)
     names = rng.permutation(PHOTOS)
     span = float(max_disparity)
