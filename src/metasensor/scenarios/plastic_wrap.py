@@ -39,10 +39,11 @@ class PlasticWrapSettings(ScenarioSettings):
     default 4 x 4; ``iterations``: after DAO) and size : scene side (pixels); grid : regions of
     the resolution maps; near_depth : image-side defocus of the near object (metres); wrap :
     the sheets (default 3 waves r.m.s. over three sheets, correlation 0.25 D, footprints spread
-    by 0.1 D between field centre and edge: 1.0-1.6 waves of Noll 4-45 per block, up to 1.2
-    waves apart across the field, 0.22 waves from a 4 x 4 block's centre to its corners, which
-    DAO's one aberration per block still holds; why: docs/decisions.md, "DAO on the plastic
-    wrap"); chart : "bars" or "chart" (the scene behind the near object)."""
+    by 0.1 D between field centre and edge, so that the wrap changes little inside a 4 x 4
+    block and DAO's one aberration per block holds
+    (:meth:`~metasensor.scenarios.screens.PlasticWrap.block_variation` measures it; the
+    figures: docs/decisions.md, "DAO on the plastic wrap"); chart : "bars" or "chart"
+    (the scene behind the near object)."""
 
     size: int = 240
     chart: str = "bars"
