@@ -82,7 +82,12 @@ class HQSOptions:
     inner : int
         w-step / x-step rounds per β (default 3).
     cg : int
-        Conjugate-gradient iterations per x-step where margins are unobserved (default 3).
+        Conjugate-gradient iterations per x-step where margins are unobserved, at most
+        (default 3).
+    cg_tol : float
+        A masked x-step's conjugate gradients stop once the residual of its system is below
+        ``cg_tol`` times its right-hand side (2-norms; default 1e-4, above float32's floor
+        of these products, about 1e-5); 0: always ``cg`` iterations.
     init_reg : float
         Smoothness weight of the start, relative to AᵀA's largest diagonal (default 1e-2).
     """
@@ -95,6 +100,7 @@ class HQSOptions:
     continuation: Continuation = Continuation(beta_max=4096.0)
     inner: int = 3
     cg: int = 3
+    cg_tol: float = 1e-4
     init_reg: float = 1e-2
 
     def __post_init__(self) -> None:
@@ -107,6 +113,8 @@ class HQSOptions:
             value = getattr(self, name)
             if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
                 raise ValueError(f"{name} must be > 0, got {value!r}")
+        if not (isinstance(self.cg_tol, int | float) and 0 <= self.cg_tol < 1):
+            raise ValueError(f"cg_tol must be in [0, 1), got {self.cg_tol!r}")
         if self.noise is not None and not (self.noise >= 0 and math.isfinite(self.noise)):
             raise ValueError(f"noise must be a non-negative number, got {self.noise!r}")
         if self.noise_model is not None and not isinstance(self.noise_model, PoissonGaussian):
@@ -159,10 +167,11 @@ def estimate_noise(data: torch.Tensor, mask: torch.Tensor) -> float:
     return float(sum(out) / len(out)) if out else 0.0
 
 
-def _pcg(data_normal, reg, mu: float, rhs, x, ax, inv, nm: FoldedNormal, iterations: int
-         ) -> tuple[torch.Tensor, torch.Tensor]:
+def _pcg(data_normal, reg, mu: float, rhs, x, ax, inv, nm: FoldedNormal, iterations: int,
+         tol: float = 0.0) -> tuple[torch.Tensor, torch.Tensor]:
     """Conjugate gradients on ``(AᵀMA + μ R) x = rhs`` from ``x``, preconditioned by the
-    circular, fully observed system (``nm.solve`` with ``inv``); ``R`` = ``reg``.
+    circular, fully observed system (``nm.solve`` with ``inv``); ``R`` = ``reg``. At most
+    ``iterations``; fewer once ``‖r‖ <= tol·‖rhs‖`` after an iteration (r the residual).
 
     ``ax`` is ``AᵀMA x`` when known (None: computed here); it is carried along the iterations
     (``AᵀMA`` of each step is one product the iteration makes anyway), so the result comes with
@@ -173,6 +182,7 @@ def _pcg(data_normal, reg, mu: float, rhs, x, ax, inv, nm: FoldedNormal, iterati
     z = nm.solve(r, inv)
     p = z
     rz = float(torch.vdot(r.flatten(), z.flatten()))
+    stop = tol * float(torch.linalg.vector_norm(rhs))
     for _ in range(iterations):
         qd = data_normal(p)
         q = qd + mu * reg(p)
@@ -183,6 +193,8 @@ def _pcg(data_normal, reg, mu: float, rhs, x, ax, inv, nm: FoldedNormal, iterati
         x = x + a * p
         ax = ax + a * qd
         r = r - a * q
+        if stop > 0 and float(torch.linalg.vector_norm(r)) <= stop:
+            break
         z = nm.solve(r, inv)
         rz_new = float(torch.vdot(r.flatten(), z.flatten()))
         p = z + (rz_new / rz) * p if rz > 0 else z
@@ -195,15 +207,17 @@ class FoldedXStep:
 
     Circular and fully observed: exact, through the folded normal operator's inverse, factored
     once per μ. Masked, or ``exact`` False (``normal`` only approximates the operator's AᵀA, as
-    for :class:`metasensor.phasespace.space_variant.SpaceVariantOperator`): ``cg``
+    for :class:`metasensor.phasespace.space_variant.SpaceVariantOperator`): at most ``cg``
     preconditioned conjugate-gradient iterations from the previous x (from the circular solve
-    at the start). ``mu`` is absolute (the scale of AᵀA).
+    at the start), fewer once the residual is below ``tol`` times the right-hand side. ``mu``
+    is absolute (the scale of AᵀA).
     """
 
     def __init__(self, normal: FoldedNormal, data_normal, mask: torch.Tensor,
-                 transform: Transform, floor: float, cg: int, exact: bool = True) -> None:
+                 transform: Transform, floor: float, cg: int, exact: bool = True,
+                 tol: float = 0.0) -> None:
         self.nm, self.data_normal, self.transform = normal, data_normal, transform
-        self.floor, self.cg = float(floor), int(cg)
+        self.floor, self.cg, self.tol = float(floor), int(cg), float(tol)
         self.full = bool(mask.all()) and exact
         self.scale = normal.scale
         sym = transform.symbol(normal.geometry.domain, normal.device) + self.floor
@@ -236,7 +250,8 @@ class FoldedXStep:
                 return self.nm.solve(rhs, inv)
             ax = None if x is None else self.data_product(x)
             x0 = self.nm.solve(rhs, inv) if x is None else x
-            out, ax = _pcg(self.data_normal, self.reg, mu, rhs, x0, ax, inv, self.nm, self.cg)
+            out, ax = _pcg(self.data_normal, self.reg, mu, rhs, x0, ax, inv, self.nm, self.cg,
+                           self.tol)
             self._last = (out, ax)
             return out
 
@@ -272,22 +287,30 @@ def _weighted_normal(op, weights: torch.Tensor) -> Callable[[torch.Tensor], torc
 
 
 def _data_weight(op: PhaseSpaceOperator, smooth: FoldedXStep, aty, y, m, unit: float,
-                 options: HQSOptions, weights=None, sigma=None) -> float:
+                 options: HQSOptions, weights=None, sigma=None, start=None) -> float:
     """λ (module docstring): lam_scale / σ² · (d / 3)², σ = max(noise, model misfit); with
-    ``weights``, the misfit is weighted and σ is the weights' reference σ."""
+    ``weights``, the misfit is weighted and σ is the weights' reference σ.
+
+    The misfit is that of the fit with smoothness weight ``MISFIT_REG``; a weaker smoothness
+    weight fits the data at least as closely (the residual of a Tikhonov fit grows with its
+    weight), so where the smooth ``start`` (weight ``init_reg``, its ``AᵀMA x`` carried by
+    ``smooth``) already fits within the noise, that fit cannot raise σ and is not made."""
     if options.lam is not None:
         return float(options.lam)
     mf = m.to(torch.float32)
     yn = y / unit
     if sigma is None:
         sigma = estimate_noise(y, m) if options.noise is None else float(options.noise)
-    fit = smooth.at(MISFIT_REG * smooth.scale)(aty, None)
     n_obs = max(float(mf.sum()) * yn.shape[0], 1.0)
-    if weights is None:
-        resid = _residual_norm(op, fit, smooth.data_product(fit), aty, yn, mf)
-    else:
-        resid = float(torch.linalg.vector_norm((op.forward(fit) - yn) * weights.sqrt()))
-    misfit = resid / math.sqrt(n_obs)
+    misfit = 0.0
+    if weights is not None or start is None or _residual_norm(
+            op, start, smooth.data_product(start), aty, yn, mf) / math.sqrt(n_obs) > sigma / unit:
+        fit = smooth.at(MISFIT_REG * smooth.scale)(aty, None)
+        if weights is None:
+            resid = _residual_norm(op, fit, smooth.data_product(fit), aty, yn, mf)
+        else:
+            resid = float(torch.linalg.vector_norm((op.forward(fit) - yn) * weights.sqrt()))
+        misfit = resid / math.sqrt(n_obs)
     sigma_n = max(sigma / unit, misfit, 1e-6 * float(yn[:, m].abs().mean()))
     lam = options.lam_scale / sigma_n**2 * (op.geometry.d / REF_STEP) ** 2
     if not (lam > 0 and math.isfinite(lam)):
@@ -330,7 +353,8 @@ def hqs(op: PhaseSpaceOperator, y, mask, options: HQSOptions = HQSOptions(), *,
     nm = op.normal()
     data_normal = op.masked_normal(m, nm)
     exact = bool(getattr(op, "normal_is_exact", True))
-    smooth = FoldedXStep(nm, data_normal, m, GRADIENT, REG_FLOOR, INIT_CG, exact)
+    smooth = FoldedXStep(nm, data_normal, m, GRADIENT, REG_FLOOR, INIT_CG, exact,
+                         options.cg_tol)
     aty = op.adjoint(yn)
     if options.noise_model is None and isinstance(data_normal, BandNormal):
         op.drop_spectra()  # from here on only the folded AᵀA and the bands' operators apply
@@ -339,13 +363,13 @@ def hqs(op: PhaseSpaceOperator, y, mask, options: HQSOptions = HQSOptions(), *,
     loop_aty = aty
     if weights is None:
         xstep = FoldedXStep(nm, data_normal, m, options.prior.transform, REG_FLOOR, options.cg,
-                            exact)
+                            exact, options.cg_tol)
         xstep.carry(smooth)  # the start's AᵀMA x: the first x-step needs no product for it
     else:  # weighted least squares: PCG on AᵀMWA, the folded AᵀA its preconditioner
         xstep = FoldedXStep(nm, _weighted_normal(op, weights), m, options.prior.transform,
-                            REG_FLOOR, options.cg, exact=False)
+                            REG_FLOOR, options.cg, exact=False, tol=options.cg_tol)
         loop_aty = op.adjoint(yn * weights)
-    lam = _data_weight(op, smooth, aty, y, m, unit, options, weights, sigma)
+    lam = _data_weight(op, smooth, aty, y, m, unit, options, weights, sigma, start=x)
     norm_y = max(float(torch.linalg.vector_norm(yn)), 1e-30)
     history: list[float] = []
 
