@@ -46,6 +46,26 @@ def _partner(g, q: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tens
     return torch.remainder(-p, my), torch.remainder(-q, mx), alias
 
 
+def _alias_index(g, device) -> tuple[torch.Tensor, torch.Tensor]:
+    """Where alias (a, b) of view frequency (p, q < Mx//2+1) lies in a real image's half
+    spectrum (Ny, Nx//2+1), flattened: frequency (p + a·My, q + b·Mx) itself, or, beyond the
+    half, the conjugate of (−(p + a·My), Nx − q − b·Mx). Returns the flat indices
+    (My·(Mx//2+1)·d²,) in the folded layout (p, q, a·d + b) and whether each is conjugated."""
+    d = g.d
+    my, mx = g.grid
+    ny, nx = g.domain
+    nh = nx // 2 + 1
+    k = torch.arange(d, device=device)
+    ky = torch.arange(my, device=device)[:, None, None, None] + my * k[None, None, :, None]
+    kx = (torch.arange(mx // 2 + 1, device=device)[None, :, None, None]
+          + mx * k[None, None, None, :])
+    ky, kx = torch.broadcast_tensors(ky, kx)
+    inside = kx < nh
+    rows = torch.where(inside, ky, torch.remainder(-ky, ny))
+    cols = torch.where(inside, kx, nx - kx)
+    return (rows * nh + cols).flatten(), ~inside.flatten()
+
+
 def _conjugates(values: torch.Tensor, partner) -> torch.Tensor:
     """The conjugate partners (:func:`_partner`) of folded values (My, Mx', k[, k])."""
     rows, cols, alias = partner
@@ -78,20 +98,16 @@ class FoldedNormal:
         cols = torch.arange(mx, device=self.device)
         self._rest = _partner(g, cols[mh:])  # the columns made from the half
         self._own = _partner(g, cols[:mh])  # the half's own conjugates (symmetrised input)
-        # the full spectra from the operator's half spectra (a real PSF's spectrum is Hermitian:
-        # H(ky, kx) = conj H(−ky, Nx − kx) for kx >= Nx//2 + 1), not from new FFTs
-        rows = torch.remainder(-torch.arange(ny, device=self.device), ny)
-        cols = nx - torch.arange(nh, nx, device=self.device)
-        mat = torch.zeros((my, mh, d * d, d * d), dtype=torch.complex64, device=self.device)
+        # the aliases of the half's view frequencies read out of the operator's half spectra
+        # (a real PSF's spectrum is Hermitian: H(ky, kx) = conj H(−ky, Nx − kx) for
+        # kx >= Nx//2 + 1), not from new FFTs nor full spectra
+        index, conj = _alias_index(g, self.device)
+        mat = torch.zeros((my * mh, d * d, d * d), dtype=torch.complex64, device=self.device)
         for i in range(0, op.n_views, op.chunk):
-            half = op.otf[i:i + op.chunk]
-            full = torch.empty((half.shape[0], ny, nx), dtype=torch.complex64,
-                               device=self.device)
-            full[..., :nh] = half
-            full[..., nh:] = half[:, rows][..., cols].conj()
-            h = self.fold(full)[:, :, :mh]
-            mat += torch.einsum("vpqi,vpqj->pqij", h.conj(), h)
-        self.half = mat / (d * d)
+            h = op.otf[i:i + op.chunk].reshape(-1, ny * nh).index_select(1, index)
+            h = torch.where(conj, h.conj(), h).T.reshape(my * mh, d * d, -1)  # (P, d², views)
+            mat += torch.matmul(h.conj(), h.transpose(-1, -2))
+        self.half = (mat / (d * d)).reshape(my, mh, d * d, d * d)
         self.scale = float(self.half.diagonal(dim1=-2, dim2=-1).real.max())
 
     @property
