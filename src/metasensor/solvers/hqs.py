@@ -259,15 +259,17 @@ class FoldedXStep:
 
 
 def _residual_norm(op, x: torch.Tensor, ax: torch.Tensor | None, aty: torch.Tensor,
-                   yn: torch.Tensor, mf: torch.Tensor) -> float:
+                   yn: torch.Tensor, mf: torch.Tensor, yy: float | None = None) -> float:
     """``‖M (A x − yn)‖`` (``yn`` zero where unobserved, ``aty`` = ``Aᵀ yn``): from ``ax`` =
     ``AᵀMA x`` when known, as ``sqrt(x·AᵀMAx − 2 x·Aᵀyn + ‖yn‖²)`` in double precision (no
-    product), else directly."""
+    product; ``yy``: ``‖yn‖²`` when known), else directly."""
     if ax is None:
         return float(torch.linalg.vector_norm((op.forward(x) - yn) * mf))
+    if yy is None:
+        yy = float(torch.sum(yn.double() ** 2))
     xd = x.flatten().double()
     sq = (float(torch.dot(xd, ax.flatten().double())) - 2.0 * float(
-        torch.dot(xd, aty.flatten().double())) + float(torch.sum(yn.double() ** 2)))
+        torch.dot(xd, aty.flatten().double())) + yy)
     return math.sqrt(max(sq, 0.0))
 
 
@@ -287,14 +289,15 @@ def _weighted_normal(op, weights: torch.Tensor) -> Callable[[torch.Tensor], torc
 
 
 def _data_weight(op: PhaseSpaceOperator, smooth: FoldedXStep, aty, y, m, unit: float,
-                 options: HQSOptions, weights=None, sigma=None, start=None) -> float:
+                 options: HQSOptions, weights=None, sigma=None, start=None, yy=None) -> float:
     """λ (module docstring): lam_scale / σ² · (d / 3)², σ = max(noise, model misfit); with
     ``weights``, the misfit is weighted and σ is the weights' reference σ.
 
     The misfit is that of the fit with smoothness weight ``MISFIT_REG``; a weaker smoothness
     weight fits the data at least as closely (the residual of a Tikhonov fit grows with its
     weight), so where the smooth ``start`` (weight ``init_reg``, its ``AᵀMA x`` carried by
-    ``smooth``) already fits within the noise, that fit cannot raise σ and is not made."""
+    ``smooth``) already fits within the noise, that fit cannot raise σ and is not made.
+    ``yy``: ``‖y / unit‖²`` when known."""
     if options.lam is not None:
         return float(options.lam)
     mf = m.to(torch.float32)
@@ -303,11 +306,12 @@ def _data_weight(op: PhaseSpaceOperator, smooth: FoldedXStep, aty, y, m, unit: f
         sigma = estimate_noise(y, m) if options.noise is None else float(options.noise)
     n_obs = max(float(mf.sum()) * yn.shape[0], 1.0)
     misfit = 0.0
-    if weights is not None or start is None or _residual_norm(
-            op, start, smooth.data_product(start), aty, yn, mf) / math.sqrt(n_obs) > sigma / unit:
+    if (weights is not None or start is None or _residual_norm(
+            op, start, smooth.data_product(start), aty, yn, mf, yy) / math.sqrt(n_obs)
+            > sigma / unit):
         fit = smooth.at(MISFIT_REG * smooth.scale)(aty, None)
         if weights is None:
-            resid = _residual_norm(op, fit, smooth.data_product(fit), aty, yn, mf)
+            resid = _residual_norm(op, fit, smooth.data_product(fit), aty, yn, mf, yy)
         else:
             resid = float(torch.linalg.vector_norm((op.forward(fit) - yn) * weights.sqrt()))
         misfit = resid / math.sqrt(n_obs)
@@ -369,13 +373,14 @@ def hqs(op: PhaseSpaceOperator, y, mask, options: HQSOptions = HQSOptions(), *,
         xstep = FoldedXStep(nm, _weighted_normal(op, weights), m, options.prior.transform,
                             REG_FLOOR, options.cg, exact=False, tol=options.cg_tol)
         loop_aty = op.adjoint(yn * weights)
-    lam = _data_weight(op, smooth, aty, y, m, unit, options, weights, sigma, start=x)
+    yy = float(torch.sum(yn.double() ** 2))
+    lam = _data_weight(op, smooth, aty, y, m, unit, options, weights, sigma, start=x, yy=yy)
     norm_y = max(float(torch.linalg.vector_norm(yn)), 1e-30)
     history: list[float] = []
 
     def on_beta(xb: torch.Tensor) -> None:
         ax = xstep.data_product(xb) if weights is None else None  # unweighted residual
-        history.append(_residual_norm(op, xb, ax, aty, yn, mf) / norm_y)
+        history.append(_residual_norm(op, xb, ax, aty, yn, mf, yy) / norm_y)
         if progress is not None:
             progress(1)
 
