@@ -181,3 +181,19 @@ def test_the_half_of_the_view_frequencies_gives_the_whole(d, grid):
     assert float((nm.apply(x) - ref).norm() / ref.norm()) < 1e-5
     assert float((nm.solve(nm.apply(x) + 1e-2 * nm.scale * x, nm.factor(1e-2)) - x).norm()
                  / x.norm()) < 1e-4
+
+
+@pytest.mark.parametrize("scan, side, pad", [(5, 20, False), (5, 9, True), (3, 7, True)])
+def test_half_matrix_equals_the_fold_of_full_spectra(scan, side, pad):
+    # G(p, q) = Σ_v h_vᴴ h_v / d² with h_v the view's full-spectrum OTF at the d² aliases of
+    # (p, q): the build reads the aliases out of the half spectra (the others as conjugates);
+    # reference: full FFTs of the zero-padded PSFs, folded (float32 sums: < 1e-5 relative).
+    op, nm = _normal(scan, side, pad)
+    ny, nx = op.geometry.domain
+    r = op.radius
+    full = torch.zeros((op.n_views, ny, nx))
+    full[:, :op.k, :op.k] = op.psf
+    spec = torch.fft.fft2(torch.roll(full, shifts=(-r, -r), dims=(-2, -1)))
+    h = nm.fold(spec)[:, :, :nm.half.shape[1]]
+    ref = torch.einsum("vpqi,vpqj->pqij", h.conj(), h) / op.geometry.d ** 2
+    assert float((nm.half - ref).abs().max() / ref.abs().max()) < 1e-5

@@ -172,3 +172,78 @@ def test_carried_normal_products_equal_direct_ones(bank):
     ref = float(torch.linalg.vector_norm((op.forward(x) - yn) * mf))
     assert abs(_residual_norm(op, x, ax, aty, yn, mf) - ref) < 1e-3 * ref
     assert _residual_norm(op, x, None, aty, yn, mf) == pytest.approx(ref, rel=1e-6)
+
+
+def _masked_setup(bank, y_bank=None, snr_db=30.0):
+    """A padded window (margins unobserved) as hqs sets it up: the operator, mask, normalised
+    data, folded and masked normal products, the smooth x-step and Aᵀy."""
+    from metasensor.solvers.hqs import INIT_CG, REG_FLOOR, FoldedXStep
+    from metasensor.solvers.priors import GRADIENT
+
+    g = make_geometry((S, S), 3, bank.shape[-1] // 2, pad=True)
+    truth = torch.from_numpy(resolution_chart(g.domain[0]))
+    clean = PhaseSpaceOperator(bank if y_bank is None else y_bank, g, device="cpu").forward(truth)
+    sigma = float(torch.sqrt((clean**2).mean() / 10 ** (snr_db / 10)))
+    mask = torch.zeros(g.grid, dtype=torch.bool)
+    mask[g.sample_slices()] = True
+    gen = torch.Generator().manual_seed(0)
+    y = (clean + sigma * torch.randn(clean.shape, generator=gen)) * mask
+    op = PhaseSpaceOperator(bank, g, device="cpu")
+    unit = 2 * float(y.sum()) / float(op.sensitivity(mask.float()).sum())
+    nm = op.normal()
+    calls = []
+
+    def data_normal(v, inner=op.masked_normal(mask, nm)):
+        calls.append(1)
+        return inner(v)
+
+    smooth = FoldedXStep(nm, data_normal, mask, GRADIENT, REG_FLOOR, INIT_CG, True)
+    return op, mask, y, unit, smooth, op.adjoint(y / unit), calls
+
+
+def test_cg_stops_once_the_residual_is_under_its_tolerance(bank):
+    # An x-step's PCG stops after the iteration that brings ‖r‖ under cg_tol·‖rhs‖ (r the
+    # residual of its own system), else runs its cg iterations; tolerance 0: always all of them.
+    _, _, _, _, step, aty, calls = _masked_setup(bank)
+    mu = 1e-2 * step.scale
+    system = step.system(mu)
+    x0 = step.nm.solve(aty, step.nm.factor(mu / step.scale, step.reg_fold))
+    for tol in (0.0, 1e-3):
+        step.tol = tol
+        del calls[:]
+        x = step.at(mu)(aty, x0)
+        n = len(calls)
+        rel = float(torch.linalg.vector_norm(aty - system(x)) / torch.linalg.vector_norm(aty))
+        if tol == 0.0:
+            assert n == 1 + step.cg  # the start's product, then one per iteration
+            full_rel = rel
+        else:
+            assert 2 <= n < 1 + step.cg and rel <= 1.01 * tol, (n, rel)
+            assert full_rel < rel
+    with pytest.raises(ValueError, match="cg_tol"):
+        HQSOptions(cg_tol=-1e-4)
+
+
+def test_data_weight_fit_is_skipped_only_where_the_start_fits_within_the_noise(bank):
+    # λ from max(noise, misfit of the 1e-4-smoothness fit): the fit is skipped where the smooth
+    # start's misfit is already under the noise (a weaker smoothness fits at least as closely),
+    # so λ is the same with and without the start; with a bank that does not fit the data
+    # (0.6 λ defocus, 0.4 λ coma) the misfit exceeds the noise and the fit is made.
+    from metasensor.solvers.hqs import _data_weight
+
+    cfg = ms.SystemConfig()
+    z = np.zeros(11)
+    z[3], z[6] = 0.6, 0.4
+    wrong = np.asarray(ms.view_psfs(cfg, zernike=z, size=bank.shape[-1]),
+                       np.float32)[cfg.view_mask()]
+    for y_bank, fits in ((None, True), (wrong, False)):
+        op, mask, y, unit, smooth, aty, calls = _masked_setup(bank, y_bank)
+        opts = HQSOptions()
+        start = smooth.at(opts.init_reg * smooth.scale)(aty, None)
+        del calls[:]
+        lam_start = _data_weight(op, smooth, aty, y, mask, unit, opts, start=start)
+        skipped = not calls
+        smooth.at(opts.init_reg * smooth.scale)(aty, None)  # the start's product carried again
+        lam_fit = _data_weight(op, smooth, aty, y, mask, unit, opts)
+        assert skipped == fits
+        assert lam_start == pytest.approx(lam_fit, rel=1e-9)
