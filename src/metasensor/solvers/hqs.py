@@ -86,8 +86,8 @@ class HQSOptions:
         (default 3).
     cg_tol : float
         A masked x-step's conjugate gradients stop once the residual of its system is below
-        ``cg_tol`` times its right-hand side (2-norms; default 1e-4, above float32's floor
-        of these products, about 1e-5); 0: always ``cg`` iterations.
+        ``cg_tol`` times its right-hand side (2-norms; default 1e-4, just above the float32
+        floor of these products: ``docs/decisions.md``); 0: always ``cg`` iterations.
     init_reg : float
         Smoothness weight of the start, relative to AᵀA's largest diagonal (default 1e-2).
     """
