@@ -57,6 +57,12 @@ def test_scenario_end_to_end_small(tmp_path, name, settings):
     for fig in saved["figures"].values():
         assert (tmp_path / fig).is_file()
     assert summary["seconds"] > 0
+    if name == "gigapixel":  # the CPU split by stage, the PSF banks apart
+        cpu = saved["stage_cpu_seconds"]
+        assert {"simulation PSF banks", "reconstruction PSF banks", "registration",
+                "blending"} <= set(cpu)
+        assert all(v >= 0 for v in cpu.values())
+        assert sum(saved["psf_banks"].values()) > 0
 
 
 def test_bar_gains_count_finer_groups_and_flag_bounds():

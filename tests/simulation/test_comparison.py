@@ -63,3 +63,16 @@ def test_plain_lightfield_shares_scale_and_budget():
     # only when the lenslet grids coincide: here phase (0, 0) of both scans is the same grid
     np.testing.assert_allclose(lf.views_clean, cap.views_clean[:, :, 0::5, 0::5][:, :, :12, :12],
                                rtol=1e-4, atol=1e-3)
+
+
+def test_comparison_2d_renders_the_same_2d_sensor_without_hardware_ao():
+    scene = np.random.default_rng(1).random((64, 64)).astype(np.float32)
+    z = [0, 0, 0, 0.3, 0.2]
+    full = simulate(scene, SMALL, zernike=z, snr_db=25, seed=4)
+    only = simulate(scene, SMALL, zernike=z, snr_db=25, seed=4, comparison="2d")
+    assert only.hardware_ao is None and only.hardware_ao_clean is None
+    np.testing.assert_array_equal(only.sensor2d, full.sensor2d)
+    np.testing.assert_array_equal(only.views, full.views)
+    for bad in ("3d", 1, None):
+        with pytest.raises(ValueError, match="comparison must be True, False or '2d'"):
+            simulate(scene, SMALL, zernike=z, comparison=bad)

@@ -9,7 +9,9 @@ Entries are ``.npy`` files written to a temporary name in the same folder and re
 of one key write the same bytes; the last rename wins); a corrupt entry counts as a miss and is
 removed. A cache folder that cannot be written (read-only, full) only costs the caching: the
 computation goes on.
-``stats`` counts hits and misses in this process (for tests and benchmarks).
+``stats`` counts hits and misses in this process, and ``compute_seconds``, the CPU seconds
+(``time.process_time``, all threads) spent computing the banks that missed (for tests and
+benchmarks).
 
 Size: the folder is kept under ``METASENSOR_CACHE_MAX_GB`` GiB (default
 :data:`DEFAULT_MAX_GB`; ``inf`` for no limit). After each store the least recently used banks
@@ -33,7 +35,7 @@ __all__ = ["cache_dir", "set_cache_dir", "cache_key", "load", "store", "stats", 
 DEFAULT_MAX_GB = 10.0
 
 _setting: Path | None = None
-stats = {"hits": 0, "misses": 0}
+stats = {"hits": 0, "misses": 0, "compute_seconds": 0.0}
 
 
 def set_cache_dir(path: str | Path | None) -> None:

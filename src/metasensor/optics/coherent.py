@@ -78,16 +78,19 @@ def plan_field(cfg: SystemConfig, n: int, dx: float, grad_max: float,
 
 def pupil_samples(cfg: SystemConfig, plan: FieldPlan, zernike=None, depth: float = 0.0,
                   phase=None, amplitude=None):
-    """Pupil amplitude and wavefront on the plan's grid.
+    """Pupil amplitude and wavefront on the centre of the plan's grid: the ``b × b`` samples
+    (b odd, ``<= plan.pupil_n``) that can hold light (within the pupil radius plus two cells);
+    every other sample of the ``pupil_n²`` grid is zero.
 
     Returns ``(a, w, norm)``: amplitude (edge cells area-weighted), wavefront in waves (0
     outside the pupil) and the energy ``sum A0²`` of the clear reference pupil.
     """
     from metasensor.backend import check_memory
 
-    check_memory(64.0 * plan.pupil_n**2, f"the pupil grid ({plan.pupil_n}² samples of a pupil "
+    b = min(plan.pupil_n, 2 * (math.ceil(plan.radius) + 2) + 1)
+    check_memory(64.0 * b**2, f"the pupil grid ({b}² samples of a pupil "
                  f"{plan.radius:.0f} samples in radius; about 8 float64 arrays)")
-    rx, ry = pupil_grid(plan.pupil_n, plan.radius)
+    rx, ry = pupil_grid(b, plan.radius)
     step = 1.0 / plan.radius
     a = pupil_amplitude(cfg, rx, ry, step, amplitude)
     inside = a > 0
@@ -107,12 +110,10 @@ def point_field(cfg: SystemConfig, plan: FieldPlan, a: np.ndarray, w: np.ndarray
     """
     p = torch.polar(torch.as_tensor(a, dtype=torch.float64, device=device),
                     torch.as_tensor(2 * np.pi * w, dtype=torch.float64, device=device))
-    m = plan.pupil_n
     if plan.method == "fft":
-        u = torch.fft.fftshift(torch.fft.fft2(torch.fft.ifftshift(p)))
-        c, h = m // 2, n // 2
-        u = u[c - h:c + h + 1, c - h:c + h + 1] / (m * math.sqrt(norm))
-        return u.to(dtype)
+        m = plan.pupil_n
+        return (_centred_dft(p, n, m) / (m * math.sqrt(norm))).to(dtype)
+    m = p.shape[0]
     df = cfg.na / cfg.wavelength / plan.radius  # pupil sample spacing [1/m]
     f = (np.arange(m) - m // 2) * df
     x = (np.arange(n) - n // 2) * dx
@@ -121,6 +122,23 @@ def point_field(cfg: SystemConfig, plan: FieldPlan, a: np.ndarray, w: np.ndarray
     u = e @ p @ e.T  # rows y, columns x
     u *= df * dx / math.sqrt(norm)
     return u.to(dtype)
+
+
+def _centred_dft(p: torch.Tensor, n: int, m: int) -> torch.Tensor:
+    """``fftshift(fft2(ifftshift(P)))`` cropped to its centre ``n × n``, where ``P`` is the
+    ``m × m`` grid (odd sizes) holding ``p`` (``b × b``, b <= m) at its centre and zeros
+    elsewhere: two passes of 1-D FFTs of length m, along x over the b rows of ``p`` only, then
+    along y for the n output columns only (the same sums as the full 2-D FFT)."""
+    b = p.shape[0]
+    dev = p.device
+    out_idx = torch.arange(-(n // 2), n // 2 + 1, device=dev) % m  # centred k ↔ FFT index
+    at = (torch.arange(b, device=dev) - b // 2) % m  # ifftshift: centred j ↔ FFT index
+    buf = p.new_zeros((b, m))
+    buf[:, at] = p
+    fx = torch.fft.fft(buf, dim=1)[:, out_idx]  # (b, n)
+    buf = p.new_zeros((m, n))
+    buf[at] = fx
+    return torch.fft.fft(buf, dim=0)[out_idx]
 
 
 def binned_intensity_mft(cfg: SystemConfig, plan: FieldPlan, a: np.ndarray, w: np.ndarray,
@@ -136,7 +154,7 @@ def binned_intensity_mft(cfg: SystemConfig, plan: FieldPlan, a: np.ndarray, w: n
         raise ValueError(f"grid size {n} is not a multiple of the bin {k}")
     p = torch.polar(torch.as_tensor(a, dtype=torch.float64, device=device),
                     torch.as_tensor(2 * np.pi * w, dtype=torch.float64, device=device))
-    m = plan.pupil_n
+    m = p.shape[0]
     df = cfg.na / cfg.wavelength / plan.radius
     f = (np.arange(m) - m // 2) * df
     x = (np.arange(n) - n // 2) * dx

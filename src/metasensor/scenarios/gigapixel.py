@@ -91,11 +91,15 @@ def _write_tile(path: Path, image: np.ndarray) -> str:
     return str(path)
 
 
-def _capture_tiles(out: Path, s: GigapixelSettings, layout, lens, cfg, big, margin, steps):
+def _capture_tiles(out: Path, s: GigapixelSettings, layout, lens, cfg, big, margin, steps,
+                   cpu: dict):
     """Simulate, realign and reconstruct every tile; write the meta-imaging and 2D tiles.
+    ``cpu``: CPU seconds (all threads) added per stage, the PSF banks computed (cache misses)
+    apart from the rest.
 
     Returns (true positions, meta tile paths, 2D tile paths, the photon scale)."""
     import metasensor as ms
+    from metasensor.optics.cache import stats
 
     o = cfg.field_offset_px
     fz_lens = lens.field_zernike(cfg, (s.field_px, s.field_px))
@@ -110,14 +114,22 @@ def _capture_tiles(out: Path, s: GigapixelSettings, layout, lens, cfg, big, marg
                         (s.tile, s.tile))
         fz_sim = layout.tile_field_zernike(fz_lens, k, (s.tile, s.tile),
                                            offset=(err[0] - o, err[1] - o))
+        c0, b0 = time.process_time(), stats["compute_seconds"]
         cap = ms.simulate(scene, cfg, field_zernike=fz_sim, snr_db=s.snr_db,
                           seed=s.seed + 1 + layout.indices.index(k), field_blocks=s.sim_blocks,
-                          scale=scale)
+                          scale=scale, comparison="2d")
+        c1, b1 = time.process_time(), stats["compute_seconds"]
         scale = cap.scale
         views = ms.realign(cap.frames, cap.config, cap.scan_order)
         rec = ms.reconstruct(views, cap.config, blocks=s.blocks, iterations=s.iterations,
                              field_zernike=layout.tile_field_zernike(fz_lens, k),
                              space_variant=s.space_variant and s.iterations is None)
+        c2, b2 = time.process_time(), stats["compute_seconds"]
+        for name, value in (("simulation PSF banks", b1 - b0),
+                            ("simulation, rest", c1 - c0 - (b1 - b0)),
+                            ("reconstruction PSF banks", b2 - b1),
+                            ("reconstruction, rest", c2 - c1 - (b2 - b1))):
+            cpu[name] = cpu.get(name, 0.0) + value
         meta_paths[k] = _write_tile(out / "tiles" / f"meta_{k[0]}_{k[1]}.zarr",
                                     np.asarray(rec.image))
         s2d_paths[k] = _write_tile(out / "tiles" / f"sensor2d_{k[0]}_{k[1]}.zarr", cap.sensor2d)
@@ -171,11 +183,17 @@ def run_gigapixel(out: str | Path, settings: GigapixelSettings | None = None,
         margin = cfg.field_offset_px + int(np.ceil(s.jitter)) + 4
         big = _scene(s.scene, (layout.shape[0] + 2 * margin + s.tile,
                                layout.shape[1] + 2 * margin + s.tile))
+        from metasensor.optics.cache import stats
+
+        cpu: dict[str, float] = {}
+        h0, m0 = stats["hits"], stats["misses"]
         true_pos, meta_paths, s2d_paths, scale = _capture_tiles(out, s, layout, lens, cfg, big,
-                                                                margin, steps)
+                                                                margin, steps, cpu)
+        c0 = time.process_time()
         tiles = {k: open_mosaic_array(p) for k, p in meta_paths.items()}
         pairs = register_tiles(tiles, layout)
         pos = solve_positions(pairs, layout)
+        cpu["registration"] = time.process_time() - c0
         reg_err = max(float(np.hypot(pos[k][0] - true_pos[k][0], pos[k][1] - true_pos[k][1]))
                       for k in layout.indices)
         box = layout.covered(pos)
@@ -188,6 +206,7 @@ def run_gigapixel(out: str | Path, settings: GigapixelSettings | None = None,
                    for paths, name in ((meta_paths, "mosaic.ome.zarr"),
                                        (s2d_paths, "mosaic_2d.ome.zarr"))]
         t_blend = time.perf_counter() - t_blend
+        cpu["blending"] = time.process_time() - c0 - cpu["registration"]
         steps.update()
         img_meta, img_2d = (open_mosaic(m)[:] for m in mosaics)
         truth = _sample(big, (margin + box[0], margin + box[1]), shape) * np.float32(scale)
@@ -198,6 +217,8 @@ def run_gigapixel(out: str | Path, settings: GigapixelSettings | None = None,
             ("ground truth", truth), ("2D sensor", np.clip(img_2d, lo, hi)),
             ("meta-imaging sensor", np.clip(img_meta, lo, hi))], ncols=3,
             suptitle=f"{s.grid[0]}x{s.grid[1]} mosaic, single plastic lens")}
+        cpu["metrics and figures"] = time.process_time() - c0 - cpu["registration"] \
+            - cpu["blending"]
         summary = {
             "scenario": "gigapixel", "table": rows,
             "registration_error_px": reg_err,
@@ -205,6 +226,8 @@ def run_gigapixel(out: str | Path, settings: GigapixelSettings | None = None,
             "positions_true": {f"{k[0]},{k[1]}": v for k, v in true_pos.items()},
             "positions_found": {f"{k[0]},{k[1]}": v for k, v in pos.items()},
             "mosaic_shape": shape, "mosaic_origin": box[:2], "blend_seconds": t_blend,
+            "stage_cpu_seconds": cpu,
+            "psf_banks": {"computed": stats["misses"] - m0, "from_cache": stats["hits"] - h0},
             "settings": {"tile": s.tile, "grid": s.grid, "overlap": s.overlap, "jitter": s.jitter,
                          "blocks": s.blocks, "snr_db": s.snr_db, "seed": s.seed,
                          "space_variant": s.space_variant and s.iterations is None,

@@ -70,7 +70,8 @@ class Capture:
         aberrations, the total (global + field) vectors ``(by, bx, J)`` at the block centres.
     sensor2d, hardware_ao : numpy.ndarray or None, (Ly·nnum, Lx·nnum) float32
         The conventional 2D sensor and hardware adaptive optics, same photon budget per pixel
-        (None with ``comparison=False``); ``sensor2d_clean``, ``hardware_ao_clean``: noise-free.
+        (None with ``comparison=False``; ``hardware_ao`` None with ``comparison="2d"``);
+        ``sensor2d_clean``, ``hardware_ao_clean``: noise-free.
     config : SystemConfig
         ``cfg`` with ``scan`` set to the period used.
     scan_order : list of (int, int)
@@ -169,7 +170,7 @@ def simulate(scene, cfg: SystemConfig, zernike=None, field_zernike=None, depth=N
              turbulence: Turbulence | None = None, seed: int = 0, *, photons=None,
              read_noise: float = 2.0, bit_depth: int | None = None, exposure: float = 0.8,
              scale: float | None = None, sensor_shape=None, field_blocks=(4, 4),
-             depth_planes: int = 8, ao_segments: int = 15, comparison: bool = True,
+             depth_planes: int = 8, ao_segments: int = 15, comparison: bool | str = True,
              upsample: str = "spline", psf=None, device=None,
              progress: bool = False, focus_offset: float = 0.0) -> Capture:
     """Simulate one scan period of raw frames of ``scene`` (H, W) (see the module docstring).
@@ -181,7 +182,8 @@ def simulate(scene, cfg: SystemConfig, zernike=None, field_zernike=None, depth=N
     snr_db: target SNR of the views [dB] or ``photons`` (photo-electrons at full scale) for
     Poisson + Gaussian read noise (``read_noise`` e-); neither: noise-free but quantised.
     motion / turbulence: dynamics (:class:`Motion`, :class:`Turbulence`); seed: all randomness.
-    comparison: also render the 2D sensor and hardware AO (``ao_segments``² tip-tilt mirror).
+    comparison: also render the 2D sensor and hardware AO (``ao_segments``² tip-tilt mirror);
+    ``"2d"``: the 2D sensor only (``hardware_ao`` None; the 2D sensor's pixels unchanged).
     upsample: the continuous scene model behind the pixel array: ``"spline"`` (default, cubic
     interpolation), ``"box"`` (uniform pixels) or ``"point"`` (a point source per pixel).
     psf: optional provider ``psf(cfg, zernike, depth, phase=, device=) -> (nnum, nnum, Kf, Kf)``
@@ -197,6 +199,8 @@ def simulate(scene, cfg: SystemConfig, zernike=None, field_zernike=None, depth=N
                     exposure=exposure, scale=scale, sensor_shape=sensor_shape,
                     field_blocks=field_blocks, depth_planes=depth_planes, upsample=upsample,
                     psf=psf, focus_offset=focus_offset)
+    if not (isinstance(comparison, bool) or isinstance(comparison, str) and comparison == "2d"):
+        raise ValueError(f"comparison must be True, False or '2d', got {comparison!r}")
     inp = check_inputs(scene, cfg, zernike, scan, scan_order, settings)
     dev = resolve_device(device)
     seeds = np.random.SeedSequence(int(seed)).spawn(4)
@@ -230,8 +234,10 @@ def simulate(scene, cfg: SystemConfig, zernike=None, field_zernike=None, depth=N
                       phase_screens=plan.screens, options=options)
         steps.update()
         if comparison:
-            steps.set_postfix_str("2D sensor and hardware AO")
-            comparison_sensors(cap, reference, plan, inp.zernike, field_zernike, ao_segments, seeds)
+            steps.set_postfix_str("2D sensor" if comparison == "2d"
+                                  else "2D sensor and hardware AO")
+            comparison_sensors(cap, reference, plan, inp.zernike, field_zernike,
+                               ao_segments if comparison is True else 0, seeds)
             steps.update()
         return cap
 

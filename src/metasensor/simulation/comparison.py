@@ -121,7 +121,8 @@ def comparison_sensors(cap, reference: np.ndarray, plan, zernike, field_zernike,
     """Fill ``cap``'s ``sensor2d`` and ``hardware_ao`` (clean and noisy) in place: the scene
     ``reference`` through the widefield PSF of the same (aberrated) lens, and through it with
     an ``ao_segments``² mirror fitted to the on-axis wavefront (each field block keeps W_k − D);
-    same scale, gain and noise model as the views (``seeds[1]``, ``seeds[2]``).
+    same scale, gain and noise model as the views (``seeds[1]``, ``seeds[2]``). ``ao_segments``
+    0: the 2D sensor only (``hardware_ao`` stays None).
 
     ``plan``: :class:`metasensor.simulation.sampling.RenderPlan` of the capture."""
     import torch
@@ -140,6 +141,10 @@ def comparison_sensors(cap, reference: np.ndarray, plan, zernike, field_zernike,
     accumulate(reference, comps, lambda cp: banks.widefield(cp.zernike, cp.depth, turb, "t"),
                rows, cols, out, dev)
     s2d = out[0].cpu().numpy() * np.float32(cap.scale)
+    if ao_segments == 0:
+        cap.sensor2d_clean = s2d
+        cap.sensor2d = apply_noise(s2d, cap.noise, np.random.default_rng(seeds[1]))
+        return
     mirror = SegmentedMirror(ao_segments, cap.config.obstruction)
     w_axis = _with_turbulence(zernike_wavefront(_on_axis(zernike, field_zernike, plan.grid)),
                               turb)
