@@ -2,7 +2,10 @@
 
 Rows:
 - ``plastic-wrap``, ``telescope``, ``gigapixel``: each scenario's demo (``metasensor demo
-  --scenario NAME``) with its acceptance figures and its run time on this machine.
+  --scenario NAME``) with its acceptance figures and its run time on this machine;
+  ``gigapixel-cold``: the gigapixel demo on an empty PSF cache (a new user's first run: every
+  PSF bank computed), the ``gigapixel`` row then on the cache it filled, both with their CPU
+  seconds per stage (PSF banks apart) and the load average.
 - ``stitch``: the mosaic stitcher on full-sensor tiles (the prototype's 6,000 x 8,000 pixels,
   2 x 2 positions, 256-pixel overlaps: about 185 MP out; ``--quick``: 1,000 x 1,200 tiles).
   The tiles are a band-limited synthetic texture (24 seeded plane waves, evaluated exactly at
@@ -234,7 +237,9 @@ def summary_row(s: dict) -> dict:
                     "psnr_db": {r["sensor"]: r["psnr_db"] for r in s["table"]},
                     "seam_ratio": {r["sensor"]: r["seam_ratio"] for r in s["table"]},
                     "truth_seam_ratio": s["table"][1]["truth_seam_ratio"],
-                    "space_variant": s["settings"].get("space_variant")})
+                    "space_variant": s["settings"].get("space_variant"),
+                    "stage_cpu_seconds": s.get("stage_cpu_seconds"),
+                    "psf_banks": s.get("psf_banks")})
     return row
 
 
@@ -279,6 +284,32 @@ def merge_rows(rows: list[dict], quick: bool = False) -> Path:
     return path
 
 
+def gigapixel_cold_warm(quick: bool = False) -> list[dict]:
+    """The gigapixel demo twice on one new PSF cache folder (``METASENSOR_CACHE``):
+    ``gigapixel-cold`` computes every PSF bank (a new user's first run), ``gigapixel`` is the
+    same run on the filled cache; each row with the 1-minute load average at its end (the
+    machine is shared: wall time stretches with it, CPU seconds much less)."""
+    from metasensor.scenarios import run_scenario
+
+    settings = {"tile": 120} if quick else {}
+    old = os.environ.get("METASENSOR_CACHE")
+    rows = []
+    with tempfile.TemporaryDirectory() as cache:
+        os.environ["METASENSOR_CACHE"] = cache
+        try:
+            for case in ("gigapixel-cold", "gigapixel"):
+                with tempfile.TemporaryDirectory() as tmp:
+                    row = summary_row(run_scenario("gigapixel", tmp, progress=False,
+                                                   **settings))
+                rows.append({**row, "case": case, "load_average": os.getloadavg()[0]})
+        finally:
+            if old is None:
+                os.environ.pop("METASENSOR_CACHE", None)
+            else:
+                os.environ["METASENSOR_CACHE"] = old
+    return rows
+
+
 def stitch_row(quick: bool = False) -> dict:
     """The ``stitch`` row (module docstring): the stitcher in a child process."""
     import shutil
@@ -298,16 +329,18 @@ def gigapixel_rows(quick: bool = False, save: bool = False) -> list[dict]:
     """The gigapixel demo's row, the ``stitch`` row and the ``stitch-cluster`` row; ``save``:
     each put into the results JSON as soon as it is measured (:func:`merge_rows`)."""
     rows = []
-    for make in (lambda: _scenario_rows(quick, names=("gigapixel",)),
+    for make in (lambda: gigapixel_cold_warm(quick),
                  lambda: [stitch_row(quick)], lambda: [_cluster_row()]):
-        rows += make()
+        made = make()
+        rows += made
         if save:
-            merge_rows(rows[-1:], quick)
+            merge_rows(made, quick)
     return rows
 
 
 def run(quick: bool = False) -> list[dict]:
-    rows = _scenario_rows(quick)
+    rows = _scenario_rows(quick, names=("plastic-wrap", "telescope"))
+    rows += gigapixel_cold_warm(quick)
     rows.append(stitch_row(quick))
     rows.append(_cluster_row())
     return rows

@@ -324,11 +324,12 @@ def _simulate_bank(cfg, u0: torch.Tensor, os_, npos, lenslets, kf, dev) -> np.nd
 
     starts = range(0, npos, rows)
     buf = torch.empty((min(rows, npos), npos, n, n), dtype=torch.complex64, device=dev)
+    ibuf = torch.empty((min(rows, npos) * npos, n, n), dtype=torch.float32, device=dev)
     for r0 in tqdm(starts, desc="view PSFs", disable=None if len(starts) > 4 else True,
                    leave=False):
         r1 = min(npos, r0 + rows)
         u = torch.mul(shifted[r0:r1], mla, out=buf[:r1 - r0])  # the point at s, times the MLA
-        inten = _propagated_intensity(u.view(-1, n, n), hz)
+        inten = _propagated_intensity(u.view(-1, n, n), hz, out=ibuf[:(r1 - r0) * npos])
         pix = _bin(inten, os_)
         b = pix.shape[0]
         blocks = pix.reshape(b, lenslets, nnum, lenslets, nnum).permute(2, 4, 0, 1, 3)
@@ -358,10 +359,12 @@ def _propagate(u: torch.Tensor, hz: torch.Tensor) -> torch.Tensor:
     return torch.fft.ifft2(torch.fft.fft2(u).mul_(hz))
 
 
-def _propagated_intensity(u: torch.Tensor, hz: torch.Tensor) -> torch.Tensor:
-    """``|IFFT2(FFT2(u) · hz)|²`` (:func:`_propagate`), float32 (b, n, n)."""
+def _propagated_intensity(u: torch.Tensor, hz: torch.Tensor,
+                          out: torch.Tensor | None = None) -> torch.Tensor:
+    """``|IFFT2(FFT2(u) · hz)|²`` (:func:`_propagate`), float32 (b, n, n), into ``out`` if
+    given (a reused buffer: no fresh pages per batch)."""
     ri = torch.view_as_real(_propagate(u, hz))
-    inten = ri[..., 0].square()
+    inten = torch.square(ri[..., 0], out=out)
     return inten.addcmul_(ri[..., 1], ri[..., 1])
 
 
