@@ -87,3 +87,31 @@ def test_cache_counts_the_cpu_seconds_of_the_banks_it_computed(tmp_path):
     assert s1 > s0
     psf_mod.view_psfs(cfg, [0, 0, 0, 0.4], size=9, subsample=3, cache=tmp_path)  # a hit
     assert stats["compute_seconds"] == s1
+
+
+@pytest.mark.parametrize("z4, z7", [(0.0, 0.0), (0.6, 0.3)])
+def test_band_limited_bank_equals_the_direct_one(z4, z7):
+    """The bank from band_positions() positions per pitch, interpolated to the subsample-3 grid,
+    against one propagation per output position (the residual: U0's light beyond its grid)."""
+    from metasensor.optics import bank
+
+    cfg = ms.SystemConfig(nnum=5, mla_pitch=23e-6, mla_focal=230e-6, scan=5)
+    assert bank.band_positions(cfg) < 15  # the band-limited path is the one taken
+    z = np.zeros(8)
+    z[3], z[6] = z4, z7
+    band = psf_mod.view_psfs(cfg, z, subsample=3, cache=False, band_limited=True)
+    direct = psf_mod.view_psfs(cfg, z, subsample=3, cache=False)
+    assert band.shape == direct.shape and band.dtype == np.float32
+    assert np.abs(band - direct).max() <= 2e-4 * direct.max()
+    assert band.sum() == pytest.approx(direct.sum(), rel=1e-5)
+    with pytest.raises(TypeError, match="band_limited must be True or False"):
+        psf_mod.view_psfs(cfg, z, subsample=3, cache=False, band_limited=1)
+
+
+def test_band_positions_sample_the_intensity_band():
+    from metasensor.optics.bank import band_positions
+
+    cfg = ms.SystemConfig()
+    nyquist = 4 * cfg.na * cfg.mla_pitch / cfg.wavelength  # 2 NA/λ, twice per cycle
+    p = band_positions(cfg)
+    assert p % 2 == 1 and nyquist < p <= 1.1 * nyquist + 2

@@ -79,7 +79,7 @@ def _gradient(z, phase, rx, ry, depth, cfg):
 
 
 def view_psfs(cfg, zernike=None, depth=0.0, *, phase=None, amplitude=None, subsample=1,
-              size=None, device=None, cache=True):
+              size=None, device=None, cache=True, band_limited=False):
     if phase is None and amplitude is None:  # memoised (tests call it with few arguments)
         key = (cfg.to_json(), None if zernike is None else tuple(np.asarray(zernike, float)),
                float(depth), subsample, size)

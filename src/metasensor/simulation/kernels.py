@@ -110,14 +110,15 @@ def _psf_module():
 
 def fine_view_bank(cfg, zernike=None, depth: float = 0.0, phase=None, amplitude=None,
                    device=None, subsample: int = SUBSAMPLE) -> np.ndarray:
-    """``view_psfs(..., subsample=3)`` rescaled to photons per unit point flux:
+    """``view_psfs(..., subsample=3, band_limited=True)`` (:mod:`metasensor.optics.bank`)
+    rescaled to photons per unit point flux:
     (nnum, nnum, Kf, Kf) float32. (``view_psfs`` returns ``H_sub = per-point / subsample²``,
     each fine point carrying 1/subsample² of a pixel's flux; :func:`collapse` distributes the
     pixel's flux itself through the up-sampler ``u``, so the factor is put back here.)
     ``subsample``: another odd sub-pixel factor (1: the pixel-grid bank, for which
     :func:`collapse` with ``factor=1`` is the identity)."""
     psf = _psf_module()
-    kwargs = {"subsample": int(subsample), "device": device}
+    kwargs = {"subsample": int(subsample), "device": device, "band_limited": True}
     if phase is not None:
         kwargs["phase"] = phase
         kwargs["cache"] = False
