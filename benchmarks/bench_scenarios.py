@@ -44,8 +44,9 @@ into fields of about 1,300 px, beyond this machine's time for the row).
 
 ``python benchmarks/bench_scenarios.py --telescope [--quick] [--no-simulation]`` runs the four
 telescope rows alone (``--no-simulation``: not the simulation's), ``--gigapixel`` the gigapixel
-demo, ``stitch`` and ``stitch-cluster`` rows; each row goes into the results JSON in place of
-the old one (the other rows kept).
+demo (cold and warm), ``stitch`` and ``stitch-cluster`` rows, ``--gigapixel-demo`` the two
+demo rows alone; each row goes into the results JSON in place of the old one (the other rows
+kept).
 """
 
 from __future__ import annotations
@@ -350,6 +351,11 @@ if __name__ == "__main__":
     if "--plastic-wrap" in sys.argv:  # the plastic-wrap row alone, merged into the JSON
         quick = "--quick" in sys.argv
         rows = _scenario_rows(quick, names=("plastic-wrap",))
+        merge_rows(rows, quick)
+        print(json.dumps(rows, indent=1))
+    elif "--gigapixel-demo" in sys.argv:  # the gigapixel-cold and gigapixel rows alone
+        quick = "--quick" in sys.argv
+        rows = gigapixel_cold_warm(quick)
         merge_rows(rows, quick)
         print(json.dumps(rows, indent=1))
     elif any(a in sys.argv for a in ("--telescope", "--telescope-strong", "--gigapixel")):
