@@ -3,7 +3,7 @@
 Each case runs in a fresh process (so its peak resident memory is its own): wall and CPU
 seconds of ``view_psfs`` (cache off), peak RSS, the window K and grid, and the time of the FFTs
 the bank needs (the same number of fft2 + ifft2 pairs of the same size and batch, through the
-bank's own ``_propagate``: scipy.fft on CPU, torch on CUDA; timed in the
+bank's own ``_propagate``, torch's FFT as the direct bank's; timed in the
 same process right after) with its share of the wall time. Cases: aberration-free; 1 λ r.m.s.
 random Noll modes 4-45 (seed 0) with the default 99.5 %-energy window and with K = 75; and the
 subsample = 3 bank used by the simulator. ``quick``: the aberration-free bank and the 1 λ bank
@@ -55,7 +55,7 @@ def _case(name: str, rms: float, size: int | None, subsample: int, device: str |
     hz = torch.ones((n, n), dtype=torch.complex64, device=dev)
     t1 = time.perf_counter()
     for _ in range(-(-npos // batch)):
-        psf_mod._propagate(x.clone(), hz)  # the bank's own FFT pair (scipy.fft on CPU)
+        psf_mod._propagate(x.clone(), hz)  # the direct bank's own FFT pair
     if dev.type == "cuda":
         torch.cuda.synchronize()
     fft = time.perf_counter() - t1

@@ -22,8 +22,10 @@ Two evaluations of the same bank:
   at the grid's edge adds frequencies beyond the band, which the P positions alias (a few
   1e-5 of the bank's maximum; ``tests/optics/test_bank_speedups.py`` bounds it).
 
-On CPU the FFTs run in ``scipy.fft`` (pocketfft, on torch's intra-op thread count), about
-twice as fast as torch's CPU FFT at these odd, 3- and 5-smooth sizes; on CUDA in torch.
+The band-limited path runs its FFTs on CPU in ``scipy.fft`` (pocketfft, on torch's intra-op
+thread count), about twice as fast as torch's CPU FFT at these odd, 3- and 5-smooth sizes; on
+CUDA in torch. The direct path keeps torch's FFT, so its banks stay bit-for-bit those of
+earlier versions (scipy's rounding differs in the last bits).
 """
 
 from __future__ import annotations
@@ -171,7 +173,7 @@ def _band_limited_bank(cfg, u0, mla, hz, os_, pb, lenslets) -> torch.Tensor:
             x1 = min(pb, x0 + chunk)
             u = torch.mul(a[None], ramp[x0:x1, None, :], out=buf[:x1 - x0])
             u = _fft(u, 2, inverse=True).mul_(mla)  # the point at s, times the MLA
-            pix = _bin(_propagated_intensity(u, hz, out=ibuf[:x1 - x0]), os_)
+            pix = _bin(_propagated_intensity(u, hz, ibuf[:x1 - x0], scipy_cpu=True), os_)
             blocks = pix.reshape(x1 - x0, lenslets, nnum, lenslets, nnum).permute(2, 4, 1, 0, 3)
             periodic[:, :, dyi, dxi[:, x0:x1]] = blocks
     return periodic
@@ -200,10 +202,11 @@ def _fft(x: torch.Tensor, dim: int, inverse: bool = False) -> torch.Tensor:
     return torch.fft.ifft(x, dim=dim) if inverse else torch.fft.fft(x, dim=dim)
 
 
-def _propagate(u: torch.Tensor, hz: torch.Tensor) -> torch.Tensor:
+def _propagate(u: torch.Tensor, hz: torch.Tensor, scipy_cpu: bool = False) -> torch.Tensor:
     """``IFFT2(FFT2(u) · hz)`` of a batch of fields ``u`` (b, n, n) complex64 (``u`` may be
-    overwritten); scipy.fft on CPU, torch on CUDA (module docstring)."""
-    if u.device.type == "cpu":
+    overwritten); torch's FFT, or with ``scipy_cpu`` scipy.fft on CPU (module docstring; the
+    direct bank keeps torch's, so its numbers do not change)."""
+    if scipy_cpu and u.device.type == "cpu":
         from scipy import fft as sfft
 
         workers = torch.get_num_threads()
@@ -213,11 +216,11 @@ def _propagate(u: torch.Tensor, hz: torch.Tensor) -> torch.Tensor:
     return torch.fft.ifft2(torch.fft.fft2(u).mul_(hz))
 
 
-def _propagated_intensity(u: torch.Tensor, hz: torch.Tensor,
-                          out: torch.Tensor | None = None) -> torch.Tensor:
+def _propagated_intensity(u: torch.Tensor, hz: torch.Tensor, out: torch.Tensor | None = None,
+                          scipy_cpu: bool = False) -> torch.Tensor:
     """``|IFFT2(FFT2(u) · hz)|²`` (:func:`_propagate`), float32 (b, n, n), into ``out`` if
     given (a reused buffer: no fresh pages per batch)."""
-    ri = torch.view_as_real(_propagate(u, hz))
+    ri = torch.view_as_real(_propagate(u, hz, scipy_cpu))
     inten = torch.square(ri[..., 0], out=out)
     return inten.addcmul_(ri[..., 1], ri[..., 1])
 
