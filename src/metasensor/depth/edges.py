@@ -40,7 +40,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-__all__ = ["EdgeSnap", "snap_edges"]
+__all__ = ["EdgeSnap", "edge_coverage", "snap_edges"]
 
 # tangent directions (dy, dx) of the four edge orientations; the edge normal is perpendicular
 _TANGENTS = ((1, 0), (0, 1), (1, -1), (1, 1))
@@ -213,24 +213,34 @@ def _coverage(part, prof, tangent, length: int, tol, k: int, ys, xs, shape):
     return 1 - slope / gain, se / gain, ok
 
 
-def _one_pass(views, au, av, disp, opts: EdgeSnap, amax: float, allowed=None):
-    """One pass of :func:`snap_edges`: the new disparity, the number of pixels changed and the
-    measured front coverage (NaN off the edges and where it is uncertain)."""
+def two_layer_pixels(disp: torch.Tensor, jump: float, amax: float):
+    """Depth-edge pixels between two layers: ``(edge, lo, hi, padded)`` with ``lo`` / ``hi``
+    the lowest / highest disparity of each pixel's 3 x 3 neighbourhood (``(H, W)`` each),
+    ``edge`` where they move the outermost view (offset ``amax``) by at least ``jump`` view px
+    apart, every value of the 3 x 3 lies within a quarter of their gap of one of them and the
+    pixel itself on one of them (not a third layer between), and ``padded`` the map
+    replicate-padded by one pixel ``(1, 1, H + 2, W + 2)``."""
     pad = F.pad(disp[None, None], (1, 1, 1, 1), mode="replicate")
     lo = -F.max_pool2d(-pad, 3, stride=1)[0, 0]
     hi = F.max_pool2d(pad, 3, stride=1)[0, 0]
-    edge = (hi - lo) * amax >= opts.jump
-    if allowed is not None:
-        edge &= allowed
-    # two layers only: every value of the 3 x 3 within a quarter of the gap of one of them
-    near = F.unfold(pad[None] if pad.ndim == 3 else pad, 3)[0].reshape(9, *disp.shape)
+    edge = (hi - lo) * amax >= jump
+    near = F.unfold(pad, 3)[0].reshape(9, *disp.shape)
     gap = 0.25 * (hi - lo)
     edge &= (torch.minimum((near - lo).abs(), (near - hi).abs()) <= gap).all(0)
-    # and the pixel itself on one of them (not a third layer between)
     own = torch.minimum((disp - lo).abs(), (disp - hi).abs())
-    edge &= own <= torch.clamp(gap, max=0.5 * opts.jump / amax)
+    edge &= own <= torch.clamp(gap, max=0.5 * jump / amax)
+    return edge, lo, hi, pad
+
+
+def _one_pass(views, au, av, disp, opts: EdgeSnap, amax: float, allowed=None):
+    """One pass of :func:`snap_edges`: the new disparity, the number of pixels changed, the
+    measured front coverage and its standard error (NaN off the edges and where undefined)."""
+    edge, lo, hi, pad = two_layer_pixels(disp, opts.jump, amax)
+    if allowed is not None:
+        edge &= allowed
+    gap = 0.25 * (hi - lo)
     if not bool(edge.any()):
-        return disp, 0, torch.full_like(disp, float("nan"))
+        return disp, 0, torch.full_like(disp, float("nan")), torch.full_like(disp, float("nan"))
     # Sobel gradient (a pixel touching the other layer only at a corner still gets a normal)
     sob = torch.tensor([[1.0, 2.0, 1.0]], dtype=disp.dtype, device=disp.device)
     dif = torch.tensor([[-1.0, 0.0, 1.0]], dtype=disp.dtype, device=disp.device)
@@ -245,6 +255,7 @@ def _one_pass(views, au, av, disp, opts: EdgeSnap, amax: float, allowed=None):
     tangent_of = {0: _TANGENTS[0], 1: _TANGENTS[2], 2: _TANGENTS[1], 3: _TANGENTS[3]}
     h, w = disp.shape
     frac = torch.full((h, w), float("nan"), dtype=disp.dtype, device=disp.device)
+    cover, error = frac.clone(), frac.clone()
     tol = gap
     to_val = torch.stack([lo, hi])
     for s in range(4):
@@ -286,12 +297,14 @@ def _one_pass(views, au, av, disp, opts: EdgeSnap, amax: float, allowed=None):
             use = ok2 & (~ok | ((f2 - f).abs() <= se))
             f, se, ok = torch.where(use, f2, f), torch.where(use, se2, se), ok | ok2
         sure = ok & ((f - 0.5).abs() >= opts.certainty * se)
-        frac[ys, xs] = torch.where(sure, f, torch.full_like(f, float("nan")))
+        nan = torch.full_like(f, float("nan"))
+        frac[ys, xs] = torch.where(sure, f, nan)
+        cover[ys, xs], error[ys, xs] = torch.where(ok, f, nan), torch.where(ok, se, nan)
     front_now = (disp - lo).abs() <= (hi - disp).abs()
     to_front = edge & ~front_now & (frac > 0.5)
     to_back = edge & front_now & (frac < 0.5)
     out = torch.where(to_front, to_val[0], torch.where(to_back, to_val[1], disp))
-    return out, int(to_front.sum() + to_back.sum()), frac
+    return out, int(to_front.sum() + to_back.sum()), cover, error
 
 
 def snap_edges(views: torch.Tensor, au, av, disparity: torch.Tensor,
@@ -320,7 +333,28 @@ def snap_edges(views: torch.Tensor, au, av, disparity: torch.Tensor,
     allowed = F.max_pool2d((step >= options.jump).float()[None, None], 3, stride=1,
                            padding=1)[0, 0] > 0
     for _ in range(options.iterations):
-        disp, changed, _ = _one_pass(views, au, av, disp, options, amax, allowed)
+        disp, changed, _, _ = _one_pass(views, au, av, disp, options, amax, allowed)
         if changed == 0:
             break
     return disp
+
+
+def edge_coverage(views: torch.Tensor, au, av, disparity: torch.Tensor,
+                  options: EdgeSnap = EdgeSnap()) -> tuple[torch.Tensor, torch.Tensor]:
+    """The front layer's coverage of each depth-edge pixel's footprint as the views measure it
+    (one pass of :func:`snap_edges`' measurement on ``disparity``, nothing re-decided).
+
+    Parameters and units as for :func:`snap_edges`.
+
+    Returns
+    -------
+    (coverage, standard_error) : two ``(H, W)`` tensors; the share of the footprint in [0, 1]
+    (nominally: the least-squares estimate may leave it) covered by the lower-disparity layer of
+    the pixel's 3 x 3 neighbourhood and its standard error; NaN off the depth edges and where
+    the views do not define it.
+    """
+    au = np.asarray(au, dtype=np.float64)
+    av = np.asarray(av, dtype=np.float64)
+    amax = float(max(np.abs(au).max(), np.abs(av).max()))
+    _, _, cover, error = _one_pass(views, au, av, disparity, options, amax)
+    return cover, error

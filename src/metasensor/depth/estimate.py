@@ -18,7 +18,8 @@ Pipeline (the paper's Fig. 6 and Methods, "Depth estimation"):
    the disparity on the views themselves (continuous, no candidate grid).
 4. Optional confidence-weighted, edge-aware filling of low-confidence pixels; then, by
    default, each depth-edge pixel given the layer that covers more than half its footprint, as
-   the views measure it (``metasensor.depth.edges``).
+   the views measure it (``metasensor.depth.edges``); optionally a small learned choice of each
+   edge pixel's layer between the two of its neighbourhood (``metasensor.depth.learned``).
 5. Disparity → image-side depth ``z = δ · d · mla_focal``; with the main-lens focal length and
    focus distance (config or keywords), → object distance by the thin-lens equation
    (``metasensor.depth.geometry`` states the signs).
@@ -47,6 +48,7 @@ from metasensor.depth.aberration import resolve_shift_maps, warp_views
 from metasensor.depth.cost import CostVolume
 from metasensor.depth.edges import EdgeSnap, snap_edges
 from metasensor.depth.filters import GuidedFilter
+from metasensor.depth.learned import EdgeRefiner, refine_edges
 from metasensor.depth.refine import (
     fill_low_confidence,
     gauss_newton_refine,
@@ -135,9 +137,11 @@ def _check_views(views, cfg: SystemConfig) -> np.ndarray:
 
 
 def _check_settings(cfg, arr, candidates, radius, refine_iterations, refine_radius, fill_radius,
-                    eps, disparity_range, view_mask, smoothing=None, edges=None) -> np.ndarray:
+                    eps, disparity_range, view_mask, smoothing=None, edges=None,
+                    refiner=None) -> np.ndarray:
     """Validate the settings (one-line errors); returns the boolean view mask."""
-    for name, value, kind in (("smoothing", smoothing, SemiGlobal), ("edges", edges, EdgeSnap)):
+    for name, value, kind in (("smoothing", smoothing, SemiGlobal), ("edges", edges, EdgeSnap),
+                              ("refiner", refiner, EdgeRefiner)):
         if value is not None and not isinstance(value, kind):
             article = "an" if kind.__name__[0] in "AEIOU" else "a"
             raise TypeError(f"{name} must be {article} {kind.__name__} or None, got "
@@ -263,7 +267,7 @@ def estimate_depth(views, cfg: SystemConfig, calibration=None, *, candidates: in
                    fill: bool = True, fill_threshold: float = 0.1,
                    fill_radius: int | None = None, normalize: bool = True,
                    smoothing: SemiGlobal | None = SemiGlobal(),
-                   edges: EdgeSnap | None = EdgeSnap(),
+                   edges: EdgeSnap | None = EdgeSnap(), refiner: EdgeRefiner | None = None,
                    focal_length: float | None = None, focus_distance: float | None = None,
                    device=None, progress: bool = False) -> DepthResult:
     """Disparity, confidence and depth from views ``(nnum, nnum, H, W)`` (or a ``Capture``).
@@ -291,7 +295,9 @@ def estimate_depth(views, cfg: SystemConfig, calibration=None, *, candidates: in
         that decides at depth edges and thin structures (default), or None: the window
         aggregation alone.
     edges : :class:`metasensor.depth.edges.EdgeSnap` settings of the re-decision of depth-edge
-        pixels by the front layer's measured coverage (last step), or None (default): none.
+        pixels by the front layer's measured coverage (default), or None: none.
+    refiner : :class:`metasensor.depth.learned.EdgeRefiner` settings of the learned choice of
+        each depth-edge pixel's layer (after ``edges``), or None (default): none.
     focal_length, focus_distance : main-lens geometry [m] overriding the config's.
     """
     if not isinstance(cfg, SystemConfig):
@@ -300,7 +306,8 @@ def estimate_depth(views, cfg: SystemConfig, calibration=None, *, candidates: in
     if fill_radius is None:
         fill_radius = min(16, max(arr.shape[2:]))
     mask = _check_settings(cfg, arr, candidates, radius, refine_iterations, refine_radius,
-                           fill_radius, eps, disparity_range, view_mask, smoothing, edges)
+                           fill_radius, eps, disparity_range, view_mask, smoothing, edges,
+                           refiner)
     n, c = cfg.nnum, cfg.center
     lens = geometry.main_lens_geometry(cfg, focal_length, focus_distance)
     shift_maps = resolve_shift_maps(calibration, n, arr.shape[2:])
@@ -340,6 +347,8 @@ def estimate_depth(views, cfg: SystemConfig, calibration=None, *, candidates: in
                                        threshold=fill_threshold, eps=eps)
         if edges is not None:
             disp = snap_edges(stack, au, av, disp, edges)
+        if refiner is not None:
+            disp = refine_edges(stack, au, av, disp, conf, refiner)
         valid = to_numpy((conf >= fill_threshold) & ~ends).astype(bool)
         disparity = to_numpy(disp).astype(np.float32)
         confidence = to_numpy(conf).astype(np.float32)

@@ -1,0 +1,163 @@
+"""A small learned re-decision of depth-edge pixels between their two candidate layers.
+
+After the coverage re-decision (:mod:`metasensor.depth.edges`), every pixel of a two-layer depth
+edge still has to be given one of two layers: the front (the lowest disparity of its 3 x 3
+neighbourhood) or the background (the highest); the truth is the layer at the pixel centre.
+A tiny convolutional network (:class:`EdgeNet`: two 3 x 3 convolutions over a 5 x 5 patch of
+the evidence of :mod:`metasensor.depth.edgefeatures`, then two fully connected layers; ReLU;
+about 15 k parameters, float32) gives the probability that the pixel belongs to the front,
+averaged over the eight rotations and mirrors of its patch. A pixel is moved to the other
+layer (the mean of its neighbours on that layer) only where that layer's probability reaches
+``EdgeRefiner.probability``; it chooses between values the map already holds and never invents
+a depth.
+
+The weights ship as package data (``metasensor/depth/data/edge_refiner.npz``, float32 NumPy
+arrays, no pickle), trained by ``scripts/train_depth_refiner.py``
+(:mod:`metasensor.depth.refiner_training`) on rendered scenes other than the benchmark's
+evaluation scenes.
+"""
+
+from __future__ import annotations
+
+import io
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+import torch
+from torch import nn
+
+from metasensor.depth.edgefeatures import CHANNELS, PATCH, edge_samples
+
+__all__ = ["WEIGHTS", "EdgeNet", "EdgeRefiner", "load_refiner", "refine_edges", "save_refiner"]
+
+WEIGHTS = "edge_refiner.npz"
+
+
+@dataclass(frozen=True)
+class EdgeRefiner:
+    """Settings of :func:`refine_edges`.
+
+    probability : a pixel is moved to the other layer where the network gives that layer at
+        least this probability (in [0.5, 1)).
+    jump : smallest depth edge handled [outermost-view px], as :class:`EdgeSnap`'s.
+    weights : path of a weights file (``.npz`` written by :func:`save_refiner`); None: the
+        shipped :data:`WEIGHTS`.
+    """
+
+    probability: float = 0.5
+    jump: float = 1.5
+    weights: str | None = None
+
+    def __post_init__(self) -> None:
+        p = self.probability
+        if not (isinstance(p, int | float) and 0.5 <= p < 1):
+            raise ValueError(f"probability must be a number in [0.5, 1), got {p!r}")
+        if not (isinstance(self.jump, int | float) and 0 < self.jump < float("inf")):
+            raise ValueError(f"jump must be a positive number, got {self.jump!r}")
+        if self.weights is not None and not isinstance(self.weights, str | Path):
+            raise TypeError(f"weights must be a path or None, got {type(self.weights).__name__}")
+
+
+class EdgeNet(nn.Module):
+    """``(M, CHANNELS, PATCH, PATCH)`` evidence -> ``(M,)`` logit of "the pixel is the front".
+
+    The inputs are standardised by the per-channel ``mean`` / ``scale`` buffers (set from the
+    training set) before two valid 3 x 3 convolutions (``features`` channels) and two fully
+    connected layers.
+    """
+
+    def __init__(self, features: int = 32, hidden: int = 32):
+        super().__init__()
+        if features < 1 or hidden < 1:
+            raise ValueError(f"need features >= 1 and hidden >= 1, got {features}, {hidden}")
+        self.features, self.hidden = int(features), int(hidden)
+        side = PATCH - 4
+        self.body = nn.Sequential(
+            nn.Conv2d(CHANNELS, features, 3), nn.ReLU(),
+            nn.Conv2d(features, features, 3), nn.ReLU(), nn.Flatten(),
+            nn.Linear(features * side * side, hidden), nn.ReLU(), nn.Linear(hidden, 1))
+        self.register_buffer("mean", torch.zeros(CHANNELS))
+        self.register_buffer("scale", torch.ones(CHANNELS))
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        x = (x - self.mean[:, None, None]) / self.scale[:, None, None]
+        return self.body(x)[:, 0]
+
+    def probability(self, x: torch.Tensor) -> torch.Tensor:
+        """Front probability averaged over the eight rotations and mirrors of the patches."""
+        total = torch.zeros(x.shape[0], dtype=x.dtype, device=x.device)
+        for flip in (False, True):
+            y = x.flip(-1) if flip else x
+            for k in range(4):
+                total += torch.sigmoid(self(torch.rot90(y, k, dims=(-2, -1))))
+        return total / 8
+
+
+def save_refiner(model: EdgeNet, path: Path) -> None:
+    """Write ``model``'s parameters and buffers as float32 arrays (``.npz``, no pickle),
+    atomically."""
+    from metasensor.io.atomic import atomic_write_bytes
+
+    arrays = {k: v.detach().cpu().numpy().astype(np.float32) for k, v in model.state_dict().items()}
+    arrays["_features"] = np.array(model.features)
+    arrays["_hidden"] = np.array(model.hidden)
+    buf = io.BytesIO()
+    np.savez(buf, **arrays)
+    atomic_write_bytes(Path(path), buf.getvalue())
+
+
+_CACHE: dict[str, EdgeNet] = {}
+
+
+def load_refiner(path: str | Path | None = None) -> EdgeNet:
+    """The network with the weights in ``path`` (default: the shipped :data:`WEIGHTS`), in eval
+    mode, float32, on the CPU."""
+    if path is None:
+        src = resources.files("metasensor.depth").joinpath("data", WEIGHTS)
+        with resources.as_file(src) as p:
+            return load_refiner(p)
+    key = str(Path(path).resolve())
+    if key not in _CACHE:
+        with np.load(Path(path), allow_pickle=False) as z:
+            model = EdgeNet(int(z["_features"]), int(z["_hidden"]))
+            state = {k: torch.from_numpy(np.array(z[k])) for k in z.files if not k.startswith("_")}
+        model.load_state_dict(state)
+        _CACHE[key] = model.eval().float()
+    return _CACHE[key]
+
+
+def refine_edges(views: torch.Tensor, au, av, disparity: torch.Tensor,
+                 confidence: torch.Tensor, options: EdgeRefiner = EdgeRefiner(),
+                 model: EdgeNet | None = None) -> torch.Tensor:
+    """Give each two-layer depth-edge pixel the layer the network prefers (module docstring).
+
+    Parameters
+    ----------
+    views : ``(N, H, W)`` float32 tensor, the views used (normalised as for the sweep).
+    au, av : view offsets ``u − c``, ``v − c`` ``(N,)``, the centre view (0, 0) among them.
+    disparity : ``(H, W)`` disparity map [view px per view step] (not modified).
+    confidence : ``(H, W)`` confidence of the estimator in [0, 1].
+    options : :class:`EdgeRefiner`.
+    model : the network (default: :func:`load_refiner` of ``options.weights``).
+
+    Returns
+    -------
+    torch.Tensor ``(H, W)``: the disparity, edge pixels possibly moved to the mean of their
+    neighbours on the other layer; other pixels unchanged.
+    """
+    samples = edge_samples(views, au, av, disparity, confidence, jump=options.jump)
+    out = disparity.clone()
+    if samples is None:
+        return out
+    net = model if model is not None else load_refiner(options.weights)
+    net = net.to(views.device)
+    with torch.no_grad():
+        p = net.probability(samples.features)
+    to_front = ~samples.on_front & (p >= options.probability)
+    to_back = samples.on_front & (1 - p >= options.probability)
+    val = torch.where(to_front, samples.front, torch.where(to_back, samples.back,
+                                                           disparity[samples.ys, samples.xs]))
+    out[samples.ys, samples.xs] = val
+    return out

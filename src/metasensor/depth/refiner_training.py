@@ -1,0 +1,209 @@
+"""Training of the learned edge refiner (:mod:`metasensor.depth.learned`,
+``scripts/train_depth_refiner.py``).
+
+Training scenes (:func:`training_scene`): random layered scenes rendered as
+:func:`metasensor.depth.scenes.benchmark_scene` renders (scan 1, 5 x 5 or 9 x 9 views, additive
+noise at 30-40 dB, disparities within ±3 view px per view step): a slanted textured background
+and two to five objects in front of it, each a rotated ellipse, a rotated bar 1.2-5 view px
+wide or a random polygon, at random places (every sub-pixel edge position), with band-limited
+random textures of random grain or flat paint; plus the benchmark's own kinds at other seeds
+and sizes (``TRAINING_KINDS``; the benchmark's evaluation scenes are seed 1 at 192 px and are
+never used). Each scene is run through :func:`metasensor.estimate_depth` with its default
+settings, and every two-layer edge pixel of the result gives a sample: its evidence
+(:func:`metasensor.depth.edgefeatures.edge_samples`) and whether the truth at the pixel is the
+front layer; pixels whose truth is neither candidate layer (within a quarter of their gap) are
+left out.
+
+Reproducible: fixed seeds, one CPU thread, deterministic algorithms; the same call on the same
+PyTorch version gives the same weights. Optimiser: Adam (Kingma & Ba 2015), learning rate 2e-3
+with cosine decay, binary cross-entropy, a random rotation / mirror of each batch.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import torch
+
+from metasensor.depth.edgefeatures import edge_samples
+from metasensor.depth.learned import EdgeNet
+from metasensor.depth.scenes import _render_grid, benchmark_scene
+from metasensor.depth.synthetic import Layer, SyntheticViews, random_texture, render_views
+
+__all__ = ["TRAINING_KINDS", "scene_record", "samples", "train", "training_scene",
+           "training_specs"]
+
+TRAINING_KINDS = ("occluders", "thin", "mixed")
+
+
+def _shape_alpha(kind: str, shape, rng, d: int) -> np.ndarray:
+    """Opacity of one random object on the image grid ``shape`` (``d`` image px per view px)."""
+    from skimage.draw import polygon
+
+    h, w = shape
+    cy, cx = rng.uniform(0.1, 0.9) * h, rng.uniform(0.1, 0.9) * w
+    yy, xx = np.mgrid[0:h, 0:w]
+    ang = rng.uniform(0, np.pi) if rng.uniform() < 0.6 else rng.integers(0, 2) * np.pi / 2
+    ca, sa = np.cos(ang), np.sin(ang)
+    along = (xx - cx) * ca + (yy - cy) * sa
+    across = -(xx - cx) * sa + (yy - cy) * ca
+    if kind == "ellipse":
+        a, b = rng.uniform(0.05, 0.25, 2) * min(h, w)
+        return ((along / a) ** 2 + (across / b) ** 2 <= 1).astype(np.float64)
+    if kind == "bar":
+        half_w = 0.5 * rng.uniform(1.2, 5.0) * d
+        half_l = 0.5 * rng.uniform(0.3, 0.9) * min(h, w)
+        return ((np.abs(across) <= half_w) & (np.abs(along) <= half_l)).astype(np.float64)
+    k = int(rng.integers(4, 9))
+    t = np.sort(rng.uniform(0, 2 * np.pi, k))
+    rad = rng.uniform(0.05, 0.25, k) * min(h, w)
+    alpha = np.zeros(shape)
+    rr, cc = polygon(cy + rad * np.sin(t), cx + rad * np.cos(t), shape)
+    alpha[rr, cc] = 1.0
+    return alpha
+
+
+def training_scene(nnum: int = 9, size: int = 96, max_disparity: float = 3.0,
+                   snr_db: float | None = 40.0, seed: int = 0) -> SyntheticViews:
+    """One random training scene (module docstring); arguments and result as for
+    :func:`metasensor.depth.scenes.benchmark_scene`."""
+    cfg, d, shape = _render_grid(nnum, size, max_disparity)
+    rng = np.random.default_rng(seed)
+    span = float(max_disparity)
+
+    def texture() -> np.ndarray:
+        if rng.uniform() < 0.1:
+            return np.full(shape, rng.uniform(0.2, 0.9))
+        return random_texture(shape, seed=int(rng.integers(2**31)),
+                              scale_px=float(rng.uniform(1.0, 3.5) * d))
+
+    theta = rng.uniform(0, 2 * np.pi)
+    yy, xx = np.mgrid[0:shape[0], 0:shape[1]] / max(shape) * 2 - 1
+    ramp = np.cos(theta) * xx + np.sin(theta) * yy
+    back = span * (rng.uniform(0.2, 0.8) + rng.uniform(0.0, 0.3) * ramp)
+    layers = [Layer(np.ones(shape), back * d, texture())]
+    count = int(rng.integers(2, 6))
+    disparities = np.sort(rng.uniform(-1.0, 0.4, count))[::-1] * span
+    for dv in disparities:
+        kind = ("ellipse", "bar", "polygon")[int(rng.integers(3))]
+        slant = rng.uniform(-0.1, 0.1) * span * ramp if rng.uniform() < 0.3 else 0.0
+        layers.append(Layer(_shape_alpha(kind, shape, rng, d), (dv + slant) * d, texture()))
+    return render_views(np.full(shape, 0.5), layers, cfg, snr_db=snr_db, seed=seed,
+                        view_mask=np.ones((nnum, nnum), bool))
+
+
+def training_specs(scenes: int, seed: int = 0) -> list[tuple]:
+    """``scenes`` scene specifications ``(source, nnum, size, snr_db, scene seed)``: two in
+    three random scenes (:func:`training_scene`), one in three a benchmark kind at a seed >= 2
+    and a size other than 192 px; views per side, size and SNR alternate and vary."""
+    rng = np.random.default_rng(seed)
+    specs = []
+    for i in range(scenes):
+        nnum, snr = ((9, 40.0), (5, 30.0))[i % 2]
+        snr = float(snr - rng.uniform(0, 4) if nnum == 9 else snr + rng.uniform(0, 4))
+        s = int(seed * 10**6 + 2 + i)
+        if i % 3 == 2:
+            kind = TRAINING_KINDS[(i // 3) % len(TRAINING_KINDS)]
+            specs.append((kind, nnum, int(rng.choice((96, 112, 128))), snr, s))
+        else:
+            specs.append(("random", nnum, int(rng.choice((80, 96, 112))), snr, s))
+    return specs
+
+
+def render_spec(spec) -> SyntheticViews:
+    """The scene of one specification of :func:`training_specs`."""
+    source, nnum, size, snr, s = spec
+    if source == "random":
+        return training_scene(nnum, size, 3.0, snr, s)
+    return benchmark_scene(source, nnum, size, 3.0, snr, seed=s)
+
+
+def scene_record(sv: SyntheticViews):
+    """Run the estimator (default settings, every view) on ``sv``: ``(views (N, H, W) as the
+    estimator normalises them, au, av, disparity, confidence)`` as tensors / arrays."""
+    import warnings
+
+    from metasensor.depth.estimate import _prepared_stack, estimate_depth
+
+    n = sv.config.nnum
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        res = estimate_depth(sv.views, sv.config, view_mask=np.ones((n, n), bool))
+    uu, vv = np.divmod(np.arange(n * n), n)
+    stack = _prepared_stack(sv.views, uu, vv, None, True, torch.device("cpu"))
+    stack -= stack.mean()
+    c = n // 2
+    return (stack, uu - c, vv - c, torch.from_numpy(res.disparity),
+            torch.from_numpy(res.confidence))
+
+
+def samples(record, truth: np.ndarray, jump: float = 1.5):
+    """``(features (M, C, P, P) float16, label (M,) 1 = front, weight (M,))`` of one scene's
+    edge pixels whose truth is one of their two candidate layers, weighted by the squared gap
+    between the layers (what a wrong choice adds to the squared error); None without any."""
+    stack, au, av, disp, conf = record
+    s = edge_samples(stack, au, av, disp, conf, jump=jump)
+    if s is None:
+        return None
+    t = torch.from_numpy(np.asarray(truth, np.float32))[s.ys, s.xs]
+    tol = 0.25 * (s.hi - s.lo)
+    is_front = (t - s.front).abs() <= tol
+    is_back = (t - s.back).abs() <= tol
+    keep = is_front ^ is_back
+    if not bool(keep.any()):
+        return None
+    gap2 = ((s.hi - s.lo) ** 2)[keep].numpy().astype(np.float32)
+    return (s.features[keep].numpy().astype(np.float16), is_front[keep].numpy().astype(np.float32),
+            gap2)
+
+
+def train(features: np.ndarray, labels: np.ndarray, weights: np.ndarray, steps: int = 4000,
+          batch: int = 512, seed: int = 0, log=print) -> EdgeNet:
+    """Train an :class:`EdgeNet` on samples of :func:`samples` (module docstring: the
+    cross-entropy of each sample weighted by ``weights``) on one thread with deterministic
+    algorithms (the caller's settings and random state come back); returns it in eval mode."""
+    if not (len(features) == len(labels) == len(weights) > 0):
+        raise ValueError(f"need as many labels and weights as samples (> 0), got "
+                         f"{len(features)}, {len(labels)}, {len(weights)}")
+    threads, deterministic = torch.get_num_threads(), torch.are_deterministic_algorithms_enabled()
+    torch.set_num_threads(1)
+    torch.use_deterministic_algorithms(True)
+    try:
+        with torch.random.fork_rng(devices=[]):
+            torch.manual_seed(seed)
+            return _fit(features, labels, weights, steps, batch, seed, log)
+    finally:
+        torch.set_num_threads(threads)
+        torch.use_deterministic_algorithms(deterministic)
+
+
+def _fit(features, labels, weights, steps: int, batch: int, seed: int, log) -> EdgeNet:
+    rng = np.random.default_rng(seed)
+    model = EdgeNet()
+    x_all = torch.from_numpy(np.ascontiguousarray(features))
+    y_all = torch.from_numpy(np.ascontiguousarray(labels, np.float32))
+    w_all = torch.from_numpy(np.ascontiguousarray(weights, np.float32))
+    w_all = w_all / w_all.mean()
+    probe = x_all[torch.from_numpy(rng.integers(0, len(y_all), min(len(y_all), 20000)))].float()
+    model.mean.copy_(probe.mean((0, 2, 3)))
+    model.scale.copy_(probe.std((0, 2, 3)).clamp(min=1e-3))
+    opt = torch.optim.Adam(model.parameters(), lr=2e-3)
+    sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, max(steps, 1), eta_min=2e-5)
+    loss_fn = torch.nn.BCEWithLogitsLoss(reduction="none")
+    t0 = time.perf_counter()
+    model.train()
+    for step in range(steps):
+        idx = torch.from_numpy(rng.integers(0, len(y_all), batch))
+        x = x_all[idx].float()
+        x = torch.rot90(x.flip(-1) if rng.uniform() < 0.5 else x, int(rng.integers(4)),
+                        dims=(-2, -1))
+        loss = (loss_fn(model(x), y_all[idx]) * w_all[idx]).mean()
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+        sched.step()
+        if log is not None and (step + 1) % max(1, steps // 10) == 0:
+            log(f"step {step + 1}/{steps}: loss {float(loss.detach()):.4f} "
+                f"({time.perf_counter() - t0:.0f} s)")
+    return model.eval()
