@@ -14,8 +14,9 @@ Hard scenes of plain light-field cameras (``metasensor.depth.scenes``: 9 x 9 vie
 (``smoothing=None``), scored as the 4D light-field benchmark does (BadPix 0.07 / 0.03 / 0.01,
 MSE x 100) over the view minus a 15-px border, with whether the span covers the truth and the
 scores on the pixels the estimator marks valid; each also without the re-decision of
-depth-edge pixels (``edges=None``, ``metasensor.depth.edges``), and on photographs in front of a
-photograph (``scenes.natural_scene``, a family that re-decision was not tuned on). The speed
+depth-edge pixels (``edges=None``, ``metasensor.depth.edges``) and with the learned choice of
+their layer (``refiner=EdgeRefiner()``, ``metasensor.depth.learned``), and on photographs in
+front of a photograph (``scenes.natural_scene``, a family neither was tuned or trained on). The speed
 rows time the default (semi-global matching) and the window aggregation alone in the same run.
 ``quick``: 200 x 200 views and smaller scenes (< 1 min).
 """
@@ -141,10 +142,11 @@ def _accuracy_rows(size: int) -> list[dict]:
 HARD_CASES = ((9, 40.0), (5, 30.0))  # views per side, SNR [dB]
 
 
-def _hard_row(sv, n: int, smoothing, label: str, edges=ms.depth.EdgeSnap()) -> dict:
+def _hard_row(sv, n: int, smoothing, label: str, edges=ms.depth.EdgeSnap(),
+              refiner=None) -> dict:
     t0 = time.perf_counter()
     res = ms.estimate_depth(sv.views, sv.config, view_mask=np.ones((n, n), bool),
-                            smoothing=smoothing, edges=edges)
+                            smoothing=smoothing, edges=edges, refiner=refiner)
     dt = time.perf_counter() - t0
     m = np.zeros(sv.disparity.shape, bool)
     m[15:-15, 15:-15] = True
@@ -175,12 +177,14 @@ def _hard_rows(size: int) -> list[dict]:
             rows.append(_hard_row(sv, n, ms.depth.SemiGlobal(), name))
             rows.append(_hard_row(sv, n, ms.depth.SemiGlobal(), name + ", no edge re-decision",
                                   edges=None))
+            rows.append(_hard_row(sv, n, ms.depth.SemiGlobal(), name + ", learned edge refiner",
+                                  refiner=ms.depth.EdgeRefiner()))
             if n == 9:
                 rows.append(_hard_row(sv, n, None, name + ", window only"))
     return rows
 
 
-def _natural_rows(size: int, seeds=(1, 2, 3)) -> list[dict]:
+def _natural_rows(size: int, seeds=(1, 2, 3, 4)) -> list[dict]:
     """Photographs in front of a photograph (``scenes.natural_scene``, a family the edge
     re-decision was not tuned on), default settings with and without the edge re-decision."""
     from metasensor.depth.scenes import natural_scene
@@ -193,6 +197,8 @@ def _natural_rows(size: int, seeds=(1, 2, 3)) -> list[dict]:
             rows.append(_hard_row(sv, n, ms.depth.SemiGlobal(), name))
             rows.append(_hard_row(sv, n, ms.depth.SemiGlobal(), name + ", no edge re-decision",
                                   edges=None))
+            rows.append(_hard_row(sv, n, ms.depth.SemiGlobal(), name + ", learned edge refiner",
+                                  refiner=ms.depth.EdgeRefiner()))
     return rows
 
 
@@ -203,7 +209,7 @@ def run(quick: bool = False) -> list[dict]:
         torch.set_num_threads(2)
         rows += _accuracy_rows(240 if quick else 480)
         rows += _hard_rows(96 if quick else 192)
-        rows += _natural_rows(64 if quick else 128, seeds=(1,) if quick else (1, 2, 3))
+        rows += _natural_rows(64 if quick else 128, seeds=(1,) if quick else (1, 2, 3, 4))
     finally:
         torch.set_num_threads(threads)
     return rows

@@ -47,7 +47,7 @@ def test_shipped_weights_are_small_float32_and_load_without_pickle():
 def test_refiner_only_chooses_between_the_two_layers_of_each_edge(small_scene):
     sv, (stack, au, av, disp, conf) = small_scene
     before = disp.clone()
-    out = refine_edges(stack, au, av, disp, conf, EdgeRefiner())
+    out = refine_edges(stack, au, av, disp, conf, EdgeRefiner(passes=1))
     assert torch.equal(disp, before)  # the input is not modified
     edge, lo, hi, _ = two_layer_pixels(disp, 1.5, float(np.abs(au).max()))
     changed = out != disp
@@ -58,6 +58,10 @@ def test_refiner_only_chooses_between_the_two_layers_of_each_edge(small_scene):
     # the new value is one of the two layers (the mean of the neighbours on it)
     near = torch.minimum((new - lo[changed]).abs(), (new - hi[changed]).abs())
     assert bool((near <= 0.25 * gap + 1e-6).all())
+    # a second round changes pixels next to the first round's edges only
+    twice = refine_edges(stack, au, av, disp, conf, EdgeRefiner(passes=2))
+    grown = torch.nn.functional.max_pool2d(edge.float()[None, None], 3, 1, 1)[0, 0] > 0
+    assert bool(((twice != disp) <= grown).all())
     # probability 1 - eps changes (almost) nothing
     sure = refine_edges(stack, au, av, disp, conf, EdgeRefiner(probability=0.999999))
     assert int((sure != disp).sum()) <= int(changed.sum())
@@ -109,7 +113,8 @@ def test_edge_samples_none_without_edges():
 
 
 @pytest.mark.parametrize("kwargs", [dict(probability=0.4), dict(probability=1.0),
-                                    dict(jump=0), dict(jump=float("inf"))])
+                                    dict(jump=0), dict(jump=float("inf")), dict(passes=0),
+                                    dict(passes=1.5)])
 def test_refiner_settings_are_checked(kwargs):
     with pytest.raises(ValueError, match=next(iter(kwargs))):
         EdgeRefiner(**kwargs)

@@ -8,8 +8,8 @@ the evidence of :mod:`metasensor.depth.edgefeatures`, then two fully connected l
 about 15 k parameters, float32) gives the probability that the pixel belongs to the front,
 averaged over the eight rotations and mirrors of its patch. A pixel is moved to the other
 layer (the mean of its neighbours on that layer) only where that layer's probability reaches
-``EdgeRefiner.probability``; it chooses between values the map already holds and never invents
-a depth.
+``EdgeRefiner.probability``, in ``EdgeRefiner.passes`` rounds (each on the map the previous
+one left); it chooses between values the map already holds and never invents a depth.
 
 The weights ship as package data (``metasensor/depth/data/edge_refiner.npz``, float32 NumPy
 arrays, no pickle), trained by ``scripts/train_depth_refiner.py``
@@ -42,12 +42,15 @@ class EdgeRefiner:
     probability : a pixel is moved to the other layer where the network gives that layer at
         least this probability (in [0.5, 1)).
     jump : smallest depth edge handled [outermost-view px], as :class:`EdgeSnap`'s.
+    passes : rounds of choices (a pixel moved to the other layer changes its neighbours'
+        evidence); each round re-reads the evidence of the map the previous one left.
     weights : path of a weights file (``.npz`` written by :func:`save_refiner`); None: the
         shipped :data:`WEIGHTS`.
     """
 
     probability: float = 0.5
     jump: float = 1.5
+    passes: int = 2
     weights: str | None = None
 
     def __post_init__(self) -> None:
@@ -56,6 +59,8 @@ class EdgeRefiner:
             raise ValueError(f"probability must be a number in [0.5, 1), got {p!r}")
         if not (isinstance(self.jump, int | float) and 0 < self.jump < float("inf")):
             raise ValueError(f"jump must be a positive number, got {self.jump!r}")
+        if not (isinstance(self.passes, int) and 1 <= self.passes <= 8):
+            raise ValueError(f"passes must be an integer in [1, 8], got {self.passes!r}")
         if self.weights is not None and not isinstance(self.weights, str | Path):
             raise TypeError(f"weights must be a path or None, got {type(self.weights).__name__}")
 
@@ -147,17 +152,20 @@ def refine_edges(views: torch.Tensor, au, av, disparity: torch.Tensor,
     torch.Tensor ``(H, W)``: the disparity, edge pixels possibly moved to the mean of their
     neighbours on the other layer; other pixels unchanged.
     """
-    samples = edge_samples(views, au, av, disparity, confidence, jump=options.jump)
     out = disparity.clone()
-    if samples is None:
-        return out
     net = model if model is not None else load_refiner(options.weights)
     net = net.to(views.device)
-    with torch.no_grad():
-        p = net.probability(samples.features)
-    to_front = ~samples.on_front & (p >= options.probability)
-    to_back = samples.on_front & (1 - p >= options.probability)
-    val = torch.where(to_front, samples.front, torch.where(to_back, samples.back,
-                                                           disparity[samples.ys, samples.xs]))
-    out[samples.ys, samples.xs] = val
+    for _ in range(options.passes):
+        samples = edge_samples(views, au, av, out, confidence, jump=options.jump)
+        if samples is None:
+            break
+        with torch.no_grad():
+            p = net.probability(samples.features)
+        to_front = ~samples.on_front & (p >= options.probability)
+        to_back = samples.on_front & (1 - p >= options.probability)
+        if not bool((to_front | to_back).any()):
+            break
+        old = out[samples.ys, samples.xs]
+        out[samples.ys, samples.xs] = torch.where(to_front, samples.front,
+                                                  torch.where(to_back, samples.back, old))
     return out

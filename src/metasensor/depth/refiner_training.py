@@ -32,7 +32,7 @@ from metasensor.depth.scenes import _render_grid, benchmark_scene
 from metasensor.depth.synthetic import Layer, SyntheticViews, random_texture, render_views
 
 __all__ = ["TRAINING_KINDS", "scene_record", "samples", "train", "training_scene",
-           "training_specs"]
+           "training_specs", "validate"]
 
 TRAINING_KINDS = ("occluders", "thin", "mixed")
 
@@ -207,3 +207,21 @@ def _fit(features, labels, weights, steps: int, batch: int, seed: int, log) -> E
             log(f"step {step + 1}/{steps}: loss {float(loss.detach()):.4f} "
                 f"({time.perf_counter() - t0:.0f} s)")
     return model.eval()
+
+
+def validate(model: EdgeNet, specs, border: int = 10) -> list[tuple]:
+    """``(spec, MSE x 100 without, with the refiner)`` per held-out scene specification (e.g.
+    ``training_specs(n, seed + 1000)``), scored over the view minus ``border`` px."""
+    from metasensor.depth.learned import EdgeRefiner, refine_edges
+
+    rows = []
+    for spec in specs:
+        sv = render_spec(spec)
+        record = scene_record(sv)
+        new = refine_edges(*record, EdgeRefiner(), model=model)
+        m = np.zeros(sv.disparity.shape, bool)
+        m[border:-border, border:-border] = True
+        before = 100 * float(np.mean((record[3].numpy()[m] - sv.disparity[m]) ** 2))
+        after = 100 * float(np.mean((new.numpy()[m] - sv.disparity[m]) ** 2))
+        rows.append((spec, before, after))
+    return rows
