@@ -13,11 +13,12 @@ Hard scenes of plain light-field cameras (``metasensor.depth.scenes``: 9 x 9 vie
 (span measured from the views) and, for 9 x 9, the window aggregation alone
 (``smoothing=None``), scored as the 4D light-field benchmark does (BadPix 0.07 / 0.03 / 0.01,
 MSE x 100) over the view minus a 15-px border, with whether the span covers the truth and the
-scores on the pixels the estimator marks valid; each also without the re-decision of
-depth-edge pixels (``edges=None``, ``metasensor.depth.edges``) and with the learned choice of
-their layer (``refiner=EdgeRefiner()``, ``metasensor.depth.learned``), and on photographs in
-front of a photograph (``scenes.natural_scene``, a family neither was tuned or trained on). The speed
-rows time the default (semi-global matching) and the window aggregation alone in the same run.
+scores on the pixels the estimator marks valid; each also without the learned choice of
+depth-edge pixels' layer (``refiner=None``, ``metasensor.depth.learned``) and without any
+re-decision of them (also ``edges=None``, ``metasensor.depth.edges``), and on photographs in
+front of a photograph (``scenes.natural_scene``, a family neither was tuned or trained on). The
+speed rows time the default (semi-global matching) and the window aggregation alone in the same
+run.
 ``quick``: 200 x 200 views and smaller scenes (< 1 min).
 """
 
@@ -143,7 +144,7 @@ HARD_CASES = ((9, 40.0), (5, 30.0))  # views per side, SNR [dB]
 
 
 def _hard_row(sv, n: int, smoothing, label: str, edges=ms.depth.EdgeSnap(),
-              refiner=None) -> dict:
+              refiner=ms.depth.EdgeRefiner()) -> dict:
     t0 = time.perf_counter()
     res = ms.estimate_depth(sv.views, sv.config, view_mask=np.ones((n, n), bool),
                             smoothing=smoothing, edges=edges, refiner=refiner)
@@ -164,9 +165,10 @@ def _hard_row(sv, n: int, smoothing, label: str, edges=ms.depth.EdgeSnap(),
 
 
 def _hard_rows(size: int) -> list[dict]:
-    """Default settings on every hard scene (9 x 9 views at 40 dB, 5 x 5 at 30 dB), and the
-    window aggregation alone (``smoothing=None``) on the 9 x 9 ones: what semi-global matching
-    buys."""
+    """Default settings on every hard scene (9 x 9 views at 40 dB, 5 x 5 at 30 dB), without
+    the learned refiner, without any edge re-decision, and the window aggregation alone
+    (``smoothing=None``, the coverage re-decision kept as before) on the 9 x 9 ones: what
+    semi-global matching buys."""
     from metasensor.depth.scenes import SCENES, benchmark_scene
 
     rows = []
@@ -175,18 +177,19 @@ def _hard_rows(size: int) -> list[dict]:
             sv = benchmark_scene(kind, nnum=n, size=size, max_disparity=3.0, snr_db=snr, seed=1)
             name = f"hard {n}x{n} scan 1 ±3 {snr:g} dB: {kind} ({size} px)"
             rows.append(_hard_row(sv, n, ms.depth.SemiGlobal(), name))
+            rows.append(_hard_row(sv, n, ms.depth.SemiGlobal(), name + ", no learned refiner",
+                                  refiner=None))
             rows.append(_hard_row(sv, n, ms.depth.SemiGlobal(), name + ", no edge re-decision",
-                                  edges=None))
-            rows.append(_hard_row(sv, n, ms.depth.SemiGlobal(), name + ", learned edge refiner",
-                                  refiner=ms.depth.EdgeRefiner()))
+                                  edges=None, refiner=None))
             if n == 9:
-                rows.append(_hard_row(sv, n, None, name + ", window only"))
+                rows.append(_hard_row(sv, n, None, name + ", window only", refiner=None))
     return rows
 
 
 def _natural_rows(size: int, seeds=(1, 2, 3, 4)) -> list[dict]:
     """Photographs in front of a photograph (``scenes.natural_scene``, a family the edge
-    re-decision was not tuned on), default settings with and without the edge re-decision."""
+    re-decision was not tuned on and the learned refiner not trained on), default settings,
+    without the learned refiner and without any edge re-decision."""
     from metasensor.depth.scenes import natural_scene
 
     rows = []
@@ -195,10 +198,10 @@ def _natural_rows(size: int, seeds=(1, 2, 3, 4)) -> list[dict]:
             sv = natural_scene(nnum=n, size=size, max_disparity=3.0, snr_db=snr, seed=seed)
             name = f"natural {n}x{n} scan 1 ±3 {snr:g} dB: seed {seed} ({size} px)"
             rows.append(_hard_row(sv, n, ms.depth.SemiGlobal(), name))
+            rows.append(_hard_row(sv, n, ms.depth.SemiGlobal(), name + ", no learned refiner",
+                                  refiner=None))
             rows.append(_hard_row(sv, n, ms.depth.SemiGlobal(), name + ", no edge re-decision",
-                                  edges=None))
-            rows.append(_hard_row(sv, n, ms.depth.SemiGlobal(), name + ", learned edge refiner",
-                                  refiner=ms.depth.EdgeRefiner()))
+                                  edges=None, refiner=None))
     return rows
 
 

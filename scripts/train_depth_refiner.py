@@ -4,10 +4,10 @@ Reproducible (:mod:`metasensor.depth.refiner_training`): fixed seeds, one CPU th
 deterministic algorithms; the benchmark's evaluation scenes (seed 1 at 192 px) and the
 photographs of ``scenes.natural_scene`` are never in the training set.
 
-Usage: ``python scripts/train_depth_refiner.py [--scenes N] [--steps N] [--seed S] [--out PATH]
-[--samples FILE] [--validate N]`` (``--samples``: keep the rendered scenes' samples in FILE,
-``.npz``, and reuse them when FILE exists; ``--validate``: score N held-out scenes of the
-training family, seeds disjoint from the training ones, after training).
+Usage: ``python scripts/train_depth_refiner.py [--scenes N] [--steps N] [--width W] [--seed S]
+[--out PATH] [--samples FILE] [--validate N]`` (``--samples``: keep the rendered scenes'
+samples in FILE, ``.npz``, and reuse them when FILE exists; ``--validate``: score N held-out
+scenes of the training family, seeds disjoint from the training ones, after training).
 """
 
 from __future__ import annotations
@@ -55,7 +55,8 @@ def collect(scenes: int, seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--scenes", type=int, default=150)
-    parser.add_argument("--steps", type=int, default=4000)
+    parser.add_argument("--steps", type=int, default=8000)
+    parser.add_argument("--width", type=int, default=32)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--out", default=str(DEFAULT_OUT))
     parser.add_argument("--samples", default=None)
@@ -74,7 +75,7 @@ def main(argv=None) -> int:
             np.savez(cache, features=feats, labels=labels, weights=weights)
     print(f"{len(labels)} samples, {labels.mean():.3f} front "
           f"({time.perf_counter() - t0:.0f} s)", flush=True)
-    model = train(feats, labels, weights, steps=args.steps, seed=args.seed)
+    model = train(feats, labels, weights, steps=args.steps, seed=args.seed, width=args.width)
     print(f"trained in {time.perf_counter() - t0:.0f} s in all")
     save_refiner(model, Path(args.out))
     print(f"-> {args.out}")

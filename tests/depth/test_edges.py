@@ -48,9 +48,9 @@ def test_centre_term_gives_bar_edges_the_layer_at_their_centre(monkeypatch):
     covers by a little more than half went to the background with the variance alone. The
     sweep's costs alone: without the re-decision of edge pixels (metasensor.depth.edges)."""
     sv = benchmark_scene("thin", nnum=9, size=64, max_disparity=3.0, snr_db=40.0, seed=1)
-    with_centre = _score(sv, _estimate(sv, edges=None).disparity)
+    with_centre = _score(sv, _estimate(sv, edges=None, refiner=None).disparity)
     monkeypatch.setattr(estimate, "CENTRE_WEIGHT", 0.0)
-    variance = _score(sv, _estimate(sv, edges=None).disparity)
+    variance = _score(sv, _estimate(sv, edges=None, refiner=None).disparity)
     assert with_centre["mse"] <= 0.5 * variance["mse"], (with_centre, variance)
     assert with_centre["badpix"] <= variance["badpix"], (with_centre, variance)
 

@@ -119,7 +119,10 @@ def _clear_half(pad: torch.Tensor, ys, xs) -> torch.Tensor:
 
 def edge_samples(views: torch.Tensor, au, av, disparity: torch.Tensor,
                  confidence: torch.Tensor, jump: float = 1.5) -> EdgeSamples | None:
-    """The edge pixels of ``disparity`` and their features (module docstring).
+    """The edge pixels of ``disparity`` whose front coverage the views measure
+    (:func:`metasensor.depth.edges.edge_coverage` defined there) and their features (module
+    docstring). Elsewhere (small or noisy steps of the map, pixels without a clear
+    background) there is no evidence beyond the sweep's, and no sample.
 
     Parameters
     ----------
@@ -138,6 +141,10 @@ def edge_samples(views: torch.Tensor, au, av, disparity: torch.Tensor,
     edge, lo, hi, pad = two_layer_pixels(disparity, jump, amax)
     if not bool(edge.any()):
         return None
+    cover, error = edge_coverage(views, au, av, disparity, EdgeSnap(jump=jump))
+    edge &= torch.isfinite(cover) & torch.isfinite(error)
+    if not bool(edge.any()):
+        return None
     ys, xs = torch.nonzero(edge, as_tuple=True)
     centre = int(np.nonzero((au == 0) & (av == 0))[0][0])
     lo_p, hi_p = lo[ys, xs], hi[ys, xs]
@@ -149,7 +156,6 @@ def edge_samples(views: torch.Tensor, au, av, disparity: torch.Tensor,
     back = (near * ~is_front).sum(0) / (~is_front).sum(0).clamp(min=1)
     d_own = disparity[ys, xs]
     on_front = (d_own - lo_p).abs() <= (hi_p - d_own).abs()
-    cover, error = edge_coverage(views, au, av, disparity, EdgeSnap(jump=jump))
     feats = torch.zeros((ys.numel(), CHANNELS, PATCH, PATCH), dtype=views.dtype,
                         device=views.device)
     feats[:, 0] = ((_patch(disparity, ys, xs) - lo_p[:, None, None]) / gap - 0.5).clamp(-1, 1)

@@ -18,8 +18,9 @@ Pipeline (the paper's Fig. 6 and Methods, "Depth estimation"):
    the disparity on the views themselves (continuous, no candidate grid).
 4. Optional confidence-weighted, edge-aware filling of low-confidence pixels; then, by
    default, each depth-edge pixel given the layer that covers more than half its footprint, as
-   the views measure it (``metasensor.depth.edges``); optionally a small learned choice of each
-   edge pixel's layer between the two of its neighbourhood (``metasensor.depth.learned``).
+   the views measure it (``metasensor.depth.edges``), and, for plain light-field views (scan 1),
+   a small learned choice of each edge pixel's layer between the two of its neighbourhood
+   (``metasensor.depth.learned``).
 5. Disparity → image-side depth ``z = δ · d · mla_focal``; with the main-lens focal length and
    focus distance (config or keywords), → object distance by the thin-lens equation
    (``metasensor.depth.geometry`` states the signs).
@@ -267,7 +268,8 @@ def estimate_depth(views, cfg: SystemConfig, calibration=None, *, candidates: in
                    fill: bool = True, fill_threshold: float = 0.1,
                    fill_radius: int | None = None, normalize: bool = True,
                    smoothing: SemiGlobal | None = SemiGlobal(),
-                   edges: EdgeSnap | None = EdgeSnap(), refiner: EdgeRefiner | None = None,
+                   edges: EdgeSnap | None = EdgeSnap(),
+                   refiner: EdgeRefiner | None = EdgeRefiner(),
                    focal_length: float | None = None, focus_distance: float | None = None,
                    device=None, progress: bool = False) -> DepthResult:
     """Disparity, confidence and depth from views ``(nnum, nnum, H, W)`` (or a ``Capture``).
@@ -297,7 +299,8 @@ def estimate_depth(views, cfg: SystemConfig, calibration=None, *, candidates: in
     edges : :class:`metasensor.depth.edges.EdgeSnap` settings of the re-decision of depth-edge
         pixels by the front layer's measured coverage (default), or None: none.
     refiner : :class:`metasensor.depth.learned.EdgeRefiner` settings of the learned choice of
-        each depth-edge pixel's layer (after ``edges``), or None (default): none.
+        each depth-edge pixel's layer (after ``edges``; default), or None: none. Applied to
+        plain light-field views (``cfg.scan == 1``), the kind it was trained on, only.
     focal_length, focus_distance : main-lens geometry [m] overriding the config's.
     """
     if not isinstance(cfg, SystemConfig):
@@ -347,7 +350,7 @@ def estimate_depth(views, cfg: SystemConfig, calibration=None, *, candidates: in
                                        threshold=fill_threshold, eps=eps)
         if edges is not None:
             disp = snap_edges(stack, au, av, disp, edges)
-        if refiner is not None:
+        if refiner is not None and cfg.scan == 1:
             disp = refine_edges(stack, au, av, disp, conf, refiner)
         valid = to_numpy((conf >= fill_threshold) & ~ends).astype(bool)
         disparity = to_numpy(disp).astype(np.float32)

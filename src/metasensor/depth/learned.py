@@ -1,15 +1,16 @@
 """A small learned re-decision of depth-edge pixels between their two candidate layers.
 
 After the coverage re-decision (:mod:`metasensor.depth.edges`), every pixel of a two-layer depth
-edge still has to be given one of two layers: the front (the lowest disparity of its 3 x 3
-neighbourhood) or the background (the highest); the truth is the layer at the pixel centre.
-A tiny convolutional network (:class:`EdgeNet`: two 3 x 3 convolutions over a 5 x 5 patch of
-the evidence of :mod:`metasensor.depth.edgefeatures`, then two fully connected layers; ReLU;
-about 15 k parameters, float32) gives the probability that the pixel belongs to the front,
-averaged over the eight rotations and mirrors of its patch. A pixel is moved to the other
-layer (the mean of its neighbours on that layer) only where that layer's probability reaches
-``EdgeRefiner.probability``, in ``EdgeRefiner.passes`` rounds (each on the map the previous
-one left); it chooses between values the map already holds and never invents a depth.
+edge whose front coverage the views measure still has to be given one of two layers: the front
+(the lowest disparity of its 3 x 3 neighbourhood) or the background (the highest); the truth is
+the layer at the pixel centre. A tiny convolutional network (:class:`EdgeNet`: two valid 3 x 3
+convolutions over a 7 x 7 patch of the evidence of :mod:`metasensor.depth.edgefeatures`, then
+two fully connected layers; ReLU; about 23 k parameters, float32) gives the probability that the
+pixel belongs to the front, averaged over the eight rotations and mirrors of its patch. A pixel
+is moved to the other layer (the mean of its neighbours on that layer) only where that layer's
+probability reaches ``EdgeRefiner.probability``, in ``EdgeRefiner.passes`` rounds (each on the
+map the previous one left); it chooses between values the map already holds and never invents
+a depth.
 
 The weights ship as package data (``metasensor/depth/data/edge_refiner.npz``, float32 NumPy
 arrays, no pickle), trained by ``scripts/train_depth_refiner.py``

@@ -5,14 +5,18 @@ Training scenes (:func:`training_scene`): random layered scenes rendered as
 :func:`metasensor.depth.scenes.benchmark_scene` renders (scan 1, 5 x 5 or 9 x 9 views, additive
 noise at 30-40 dB, disparities within ±3 view px per view step): a slanted textured background
 and two to five objects in front of it, each a rotated ellipse, a rotated bar 1.2-5 view px
-wide or a random polygon, at random places (every sub-pixel edge position), with band-limited
-random textures of random grain or flat paint; plus the benchmark's own kinds at other seeds
+wide or a random polygon, at random places (every sub-pixel edge position), textured by
+band-limited random noise of random grain, by textured dead leaves
+(:func:`metasensor.priors.deadleaves.dead_leaves`: natural-image statistics without a
+photograph) or by flat paint; plus the benchmark's own kinds at other seeds
 and sizes (``TRAINING_KINDS``; the benchmark's evaluation scenes are seed 1 at 192 px and are
 never used). Each scene is run through :func:`metasensor.estimate_depth` with its default
-settings, and every two-layer edge pixel of the result gives a sample: its evidence
-(:func:`metasensor.depth.edgefeatures.edge_samples`) and whether the truth at the pixel is the
-front layer; pixels whose truth is neither candidate layer (within a quarter of their gap) are
-left out.
+settings but the refiner itself, and every two-layer edge pixel of the result whose coverage
+the views measure gives a sample: its evidence
+(:func:`metasensor.depth.edgefeatures.edge_samples`), whether the front's value is nearer the
+truth than the background's, and as its weight what the wrong choice adds to the squared
+error, ``|(front − t)² − (back − t)²|`` (the loss is then the expected squared error of the
+choices, the benchmark's MSE, up to a constant).
 
 Reproducible: fixed seeds, one CPU thread, deterministic algorithms; the same call on the same
 PyTorch version gives the same weights. Optimiser: Adam (Kingma & Ba 2015), learning rate 2e-3
@@ -30,6 +34,7 @@ from metasensor.depth.edgefeatures import edge_samples
 from metasensor.depth.learned import EdgeNet
 from metasensor.depth.scenes import _render_grid, benchmark_scene
 from metasensor.depth.synthetic import Layer, SyntheticViews, random_texture, render_views
+from metasensor.priors.deadleaves import dead_leaves
 
 __all__ = ["TRAINING_KINDS", "scene_record", "samples", "train", "training_scene",
            "training_specs", "validate"]
@@ -73,10 +78,15 @@ def training_scene(nnum: int = 9, size: int = 96, max_disparity: float = 3.0,
     span = float(max_disparity)
 
     def texture() -> np.ndarray:
-        if rng.uniform() < 0.1:
+        kind = rng.uniform()
+        if kind < 0.1:
             return np.full(shape, rng.uniform(0.2, 0.9))
-        return random_texture(shape, seed=int(rng.integers(2**31)),
-                              scale_px=float(rng.uniform(1.0, 3.5) * d))
+        if kind < 0.55:
+            return random_texture(shape, seed=int(rng.integers(2**31)),
+                                  scale_px=float(rng.uniform(1.0, 3.5) * d))
+        leaves = dead_leaves(max(shape), seed=int(rng.integers(2**31)), r_min=0.5 * d,
+                             r_max=float(rng.uniform(4, 16)) * d, leaves=2000)
+        return 0.1 + 0.9 * leaves[:shape[0], :shape[1]].astype(np.float64)
 
     theta = rng.uniform(0, 2 * np.pi)
     yy, xx = np.mgrid[0:shape[0], 0:shape[1]] / max(shape) * 2 - 1
@@ -120,8 +130,9 @@ def render_spec(spec) -> SyntheticViews:
 
 
 def scene_record(sv: SyntheticViews):
-    """Run the estimator (default settings, every view) on ``sv``: ``(views (N, H, W) as the
-    estimator normalises them, au, av, disparity, confidence)`` as tensors / arrays."""
+    """Run the estimator (default settings but the learned refiner, every view) on ``sv``:
+    ``(views (N, H, W) as the estimator normalises them, au, av, disparity, confidence)`` as
+    tensors / arrays, what the refiner sees."""
     import warnings
 
     from metasensor.depth.estimate import _prepared_stack, estimate_depth
@@ -129,7 +140,7 @@ def scene_record(sv: SyntheticViews):
     n = sv.config.nnum
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        res = estimate_depth(sv.views, sv.config, view_mask=np.ones((n, n), bool))
+        res = estimate_depth(sv.views, sv.config, view_mask=np.ones((n, n), bool), refiner=None)
     uu, vv = np.divmod(np.arange(n * n), n)
     stack = _prepared_stack(sv.views, uu, vv, None, True, torch.device("cpu"))
     stack -= stack.mean()
@@ -140,29 +151,23 @@ def scene_record(sv: SyntheticViews):
 
 def samples(record, truth: np.ndarray, jump: float = 1.5):
     """``(features (M, C, P, P) float16, label (M,) 1 = front, weight (M,))`` of one scene's
-    edge pixels whose truth is one of their two candidate layers, weighted by the squared gap
-    between the layers (what a wrong choice adds to the squared error); None without any."""
+    edge pixels (module docstring); None without any."""
     stack, au, av, disp, conf = record
     s = edge_samples(stack, au, av, disp, conf, jump=jump)
     if s is None:
         return None
     t = torch.from_numpy(np.asarray(truth, np.float32))[s.ys, s.xs]
-    tol = 0.25 * (s.hi - s.lo)
-    is_front = (t - s.front).abs() <= tol
-    is_back = (t - s.back).abs() <= tol
-    keep = is_front ^ is_back
-    if not bool(keep.any()):
-        return None
-    gap2 = ((s.hi - s.lo) ** 2)[keep].numpy().astype(np.float32)
-    return (s.features[keep].numpy().astype(np.float16), is_front[keep].numpy().astype(np.float32),
-            gap2)
+    gain = (s.back - t) ** 2 - (s.front - t) ** 2          # > 0: the front is the better choice
+    return (s.features.numpy().astype(np.float16), (gain > 0).numpy().astype(np.float32),
+            gain.abs().numpy().astype(np.float32))
 
 
-def train(features: np.ndarray, labels: np.ndarray, weights: np.ndarray, steps: int = 4000,
-          batch: int = 512, seed: int = 0, log=print) -> EdgeNet:
+def train(features: np.ndarray, labels: np.ndarray, weights: np.ndarray, steps: int = 8000,
+          batch: int = 512, seed: int = 0, log=print, width: int = 32) -> EdgeNet:
     """Train an :class:`EdgeNet` on samples of :func:`samples` (module docstring: the
     cross-entropy of each sample weighted by ``weights``) on one thread with deterministic
-    algorithms (the caller's settings and random state come back); returns it in eval mode."""
+    algorithms (the caller's settings and random state come back); ``width``: the network's
+    convolution channels. Returns it in eval mode."""
     if not (len(features) == len(labels) == len(weights) > 0):
         raise ValueError(f"need as many labels and weights as samples (> 0), got "
                          f"{len(features)}, {len(labels)}, {len(weights)}")
@@ -172,15 +177,21 @@ def train(features: np.ndarray, labels: np.ndarray, weights: np.ndarray, steps: 
     try:
         with torch.random.fork_rng(devices=[]):
             torch.manual_seed(seed)
-            return _fit(features, labels, weights, steps, batch, seed, log)
+            return _fit(features, labels, weights, steps, batch, seed, log, width)
     finally:
         torch.set_num_threads(threads)
         torch.use_deterministic_algorithms(deterministic)
 
 
-def _fit(features, labels, weights, steps: int, batch: int, seed: int, log) -> EdgeNet:
+def _fit(features, labels, weights, steps: int, batch: int, seed: int, log,
+         width: int) -> EdgeNet:
+    # the pixels the refiner acts on: coverage measured (samples of older collections may
+    # hold others)
+    c = features.shape[-1] // 2
+    measured = np.asarray(features[:, 4, c, c]) > 0
+    features, labels, weights = features[measured], labels[measured], weights[measured]
     rng = np.random.default_rng(seed)
-    model = EdgeNet()
+    model = EdgeNet(features=width)
     x_all = torch.from_numpy(np.ascontiguousarray(features))
     y_all = torch.from_numpy(np.ascontiguousarray(labels, np.float32))
     w_all = torch.from_numpy(np.ascontiguousarray(weights, np.float32))
