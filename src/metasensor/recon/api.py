@@ -29,8 +29,9 @@ from typing import Any
 import numpy as np
 
 from metasensor.config import SystemConfig
-from metasensor.recon.block import BlockResult, BlockTask, reconstruct_block
-from metasensor.recon.blocks import Block, Stitcher, block_zernikes, split_blocks
+from metasensor.recon.block import BlockTask, reconstruct_block
+from metasensor.recon.blocks import Block, block_zernikes, split_blocks
+from metasensor.recon.collect import Collector
 from metasensor.recon.dao_choice import DAO_CHOICES, choose_dao
 from metasensor.recon.options import ReconOptions
 
@@ -69,6 +70,9 @@ class Reconstruction:
     noise_model : PoissonGaussian or None
         The views' noise model the solver used (:mod:`metasensor.solvers.noise_model`; None:
         one global weight).
+    dao_fit_px : numpy.ndarray or None
+        ``(by, bx)`` r.m.s. residual (pixels) of DAO's last shift fit per block (NaN: no DAO
+        there; None: no DAO): :mod:`metasensor.recon.dao_fit`.
     """
 
     image: Any
@@ -88,6 +92,7 @@ class Reconstruction:
     dao_applied: list = field(default_factory=list)
     dao_zernike: np.ndarray | None = None
     noise_model: Any = None
+    dao_fit_px: np.ndarray | None = None
 
     def __repr__(self) -> str:  # the arrays by shape and dtype, not their values
         from metasensor.summary import short_repr
@@ -261,47 +266,6 @@ def _tasks(views, cfg: SystemConfig, method: str, grid, zern, opts: ReconOptions
     return out
 
 
-class _Collector:
-    """Stitches block results as they arrive and keeps their per-block records."""
-
-    def __init__(self, shape, grid, zern: np.ndarray, out, register: bool, bar) -> None:
-        by, bx = grid
-        self.stitcher = Stitcher(shape, out)
-        self.history = [[[] for _ in range(bx)] for _ in range(by)]
-        self.dao = [[[] for _ in range(bx)] for _ in range(by)]
-        self.registration = [[[] for _ in range(bx)] for _ in range(by)]
-        self.applied = [[None] * bx for _ in range(by)]
-        self.dao_zernike = None
-        from metasensor.dao.bank_registration import WAVEFRONT_MODES
-
-        self.reg_zernike = (np.zeros((by, bx, max(WAVEFRONT_MODES)), np.float32) if register
-                            else None)
-        self.zernike = zern.copy()
-        self.bar = bar
-
-    def __call__(self, res: BlockResult) -> None:
-        self.stitcher.add(res.block, res.image)
-        iy, ix = res.block.index
-        self.history[iy][ix] = res.history
-        self.dao[iy][ix] = res.dao_history
-        self.registration[iy][ix] = res.registration
-        self.applied[iy][ix] = res.dao_applied
-        if res.dao_zernike is not None:
-            if self.dao_zernike is None:
-                self.dao_zernike = np.zeros_like(self.zernike)
-            self.dao_zernike[iy, ix, :] = 0
-            m = min(res.dao_zernike.size, self.zernike.shape[-1])
-            self.dao_zernike[iy, ix, :m] = res.dao_zernike[:m]
-        if self.reg_zernike is not None and res.registration_zernike is not None:
-            self.reg_zernike[iy, ix] = res.registration_zernike
-        z = np.asarray(res.zernike, np.float32)
-        n = self.zernike.shape[-1]
-        self.zernike[iy, ix, :] = 0
-        self.zernike[iy, ix, :min(z.size, n)] = z[:n]
-        if self.bar is not None:
-            self.bar(len(res.history))
-
-
 def reconstruct(views, cfg: SystemConfig, method: str = "isa", zernike=None, field_zernike=None,
                 blocks=(1, 1), options: ReconOptions | None = None, **settings
                 ) -> Reconstruction:
@@ -384,13 +348,16 @@ def _run(views, cfg, method, grid, zern, opts: ReconOptions, plan: dict) -> Reco
     with bar_cm as bar:
         local = opts.scheduler is None or opts.scheduler in ("threads", "sync")
         plan["tick"] = bar.update if bar is not None else None
-        collect = _Collector(plan["shape"], grid, zern, opts.out, bool(opts.register),
+        collect = Collector(plan["shape"], grid, zern, opts.out, bool(opts.register),
                              None if (bar is None or local) else bar.update)
         run_tasks(reconstruct_block, _tasks(views, cfg, method, grid, zern, opts, plan),
                   collect, scheduler=opts.scheduler, num_workers=opts.num_workers)
     from metasensor.solvers.richardson_lucy import DEFAULT_ITERATIONS
 
     iterations = DEFAULT_ITERATIONS if opts.iterations is None else int(opts.iterations)
+    from metasensor.recon.dao_fit import warn_dao_fit
+
+    warn_dao_fit(collect.dao_fit, grid)
     return Reconstruction(
         image=collect.stitcher.out, zernike=collect.zernike, history=collect.history,
         blocks=plan["blocks"], method=method, config=cfg, iterations=iterations,
@@ -398,4 +365,4 @@ def _run(views, cfg, method, grid, zern, opts: ReconOptions, plan: dict) -> Reco
         dao_history=collect.dao, registration=collect.registration,
         registration_zernike=collect.reg_zernike, views_used=len(plan["uv"]),
         dao_applied=collect.applied, dao_zernike=collect.dao_zernike,
-        noise_model=plan["noise"])
+        noise_model=plan["noise"], dao_fit_px=collect.dao_fit)

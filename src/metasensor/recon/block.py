@@ -90,6 +90,7 @@ class BlockResult:
     registration_zernike: np.ndarray | None = None
     dao_applied: bool | None = None
     dao_zernike: np.ndarray | None = None
+    dao_fit_px: float | None = None
 
 
 def default_psfs(cfg: SystemConfig, zernike, device, size: int | None = None) -> np.ndarray:
@@ -203,14 +204,16 @@ def _probe(task: BlockTask, window: np.ndarray, dao, init):
 
 
 def _bank(task: BlockTask, window: np.ndarray
-          ) -> tuple[np.ndarray, np.ndarray, list[float], np.ndarray | None]:
+          ) -> tuple[np.ndarray, np.ndarray, list[float], np.ndarray | None, float | None]:
     """The block's bank ``(nnum, nnum, K, K)``, the Noll vector it was made of, DAO's history,
-    and DAO's estimate (None: no DAO; applied when it is that Noll vector)."""
+    DAO's estimate (None: no DAO; applied when it is that Noll vector) and the r.m.s. residual
+    (pixels) of DAO's last shift fit (None: no DAO)."""
     zernike = np.asarray(task.zernike, dtype=np.float32)
     if task.dao is None:
         if task.psf is not None:
-            return task.psf, zernike, [], None
-        return (task.psf_fn or default_psfs)(task.cfg, zernike, task.device), zernike, [], None
+            return task.psf, zernike, [], None, None
+        return ((task.psf_fn or default_psfs)(task.cfg, zernike, task.device), zernike, [], None,
+                None)
     from metasensor.dao import banks, estimate
 
     if task.dao_negligible > 0 and min(window.shape[-2:]) < estimate.MIN_SAMPLES:
@@ -219,7 +222,8 @@ def _bank(task: BlockTask, window: np.ndarray
         warnings.warn(f"blocks of {window.shape[-2]} x {window.shape[-1]} view samples are too "
                       f"small for DAO (at least {estimate.MIN_SAMPLES}): the aberration is not "
                       "estimated there", UserWarning, stacklevel=2)
-        return (task.psf_fn or default_psfs)(task.cfg, zernike, task.device), zernike, [], None
+        return ((task.psf_fn or default_psfs)(task.cfg, zernike, task.device), zernike, [], None,
+                None)
     init = zernike if np.any(zernike) else None
     shown = task.progress is not None  # a local run with a bar: show DAO's updates too
     dao = replace(task.dao, progress=True) if shown else task.dao
@@ -230,6 +234,7 @@ def _bank(task: BlockTask, window: np.ndarray
     merged = np.zeros(max(zernike.size, z_est.size), np.float32)
     merged[:z_est.size] = z_est
     history = [float(h) for h in res.history]
+    fit = float(res.fits[-1]) if res.fits else None
     applied = not _negligible(merged, zernike, task.dao_negligible)
     if shown:
         _report_dao(task.block.index, merged, history, task.dao.tol, applied,
@@ -238,7 +243,7 @@ def _bank(task: BlockTask, window: np.ndarray
         start = np.zeros_like(merged)
         start[:zernike.size] = zernike
         bank = (task.psf_fn or default_psfs)(task.cfg, zernike, task.device)
-        return bank, start, history, merged
+        return bank, start, history, merged, fit
     bank = (task.psf_fn(task.cfg, merged, task.device) if task.psf_fn is not None
             else banks.block_psfs(task.cfg, res, device=task.device))
     if shown:  # the estimate's bank is new: say it is done before the solver's first step
@@ -246,7 +251,7 @@ def _bank(task: BlockTask, window: np.ndarray
 
         tqdm.write(f"block {tuple(int(i) for i in task.block.index)}: PSF bank of the "
                    f"estimate ready ({np.shape(bank)[-1]} px), solving", file=sys.stderr)
-    return bank, merged, history, merged
+    return bank, merged, history, merged, fit
 
 
 def _operator(task: BlockTask, psf: np.ndarray, data_win: np.ndarray):
@@ -301,14 +306,15 @@ def _reconstruct(task: BlockTask, started) -> BlockResult:
                                                                cols)
         return _solve(task, op, window[rows, cols], np.asarray(task.zernike, np.float32), [],
                       registration, reg_zernike, started=started)
-    bank, zernike, dao_history, estimate = _bank(task, window)
+    bank, zernike, dao_history, estimate, fit = _bank(task, window)
     bank = np.asarray(bank, dtype=np.float32)
     if bank.ndim != 4 or bank.shape[:2] != (cfg.nnum, cfg.nnum):
         raise ValueError(f"psf bank must have shape (nnum, nnum, K, K) with nnum = {cfg.nnum}, "
                          f"got {bank.shape}")
     op, registration, reg_zernike = _operator(task, bank[rows, cols], window[rows, cols])
-    return _solve(task, op, window[rows, cols], zernike, dao_history, registration, reg_zernike,
-                  estimate, started)
+    res = _solve(task, op, window[rows, cols], zernike, dao_history, registration, reg_zernike,
+                 estimate, started)
+    return replace(res, dao_fit_px=fit)
 
 
 def _solve(task: BlockTask, op, data_win: np.ndarray, zernike, dao_history, registration,

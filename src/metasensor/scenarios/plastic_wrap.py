@@ -231,6 +231,7 @@ def run_plastic_wrap(out: str | Path, settings: PlasticWrapSettings | None = Non
             "true_rms_waves_per_block": np.sqrt((true_z[..., 3:] ** 2).sum(-1)),
             "dao_error_waves_per_block": _dao_error(true_z, np.asarray(rec.zernike)),
             "estimated_defocus_waves_per_block": np.asarray(rec.zernike)[..., 3],
+            "dao_fit_px_per_block": rec.dao_fit_px,
             "stage_cpu_seconds": dict(zip(("simulation", "meta-imaging reconstruction",
                                            "light-field reconstruction"), np.diff(cpu).tolist(),
                                           strict=True)),
