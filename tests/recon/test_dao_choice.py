@@ -149,5 +149,8 @@ def test_cli_plain_reconstruct_estimates_half_a_wave(tmp_path):
         ssim[name] = ms.metrics.ssim(truth=cap.truth, image=image)
     summary = json.loads((tmp_path / "after" / "summary.json").read_text())
     assert summary["method"] == "wave" and summary["dao_applied"] == [[True]]
+    from metasensor.recon.dao_fit import FIT_WARN_PX  # one wavefront explains this block
+
+    assert 0 < summary["dao_fit_px_per_block"][0][0] < FIT_WARN_PX, summary
     assert summary["provenance"]["settings"]["method"] == "auto"
     assert ssim["after"] > ssim["before"] + 0.2, ssim

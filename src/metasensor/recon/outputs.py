@@ -56,6 +56,10 @@ def write_outputs(out: Path, rec, views, origin=None, provenance: dict | None = 
         summary["dao_applied"] = rec.dao_applied  # False: negligible, the start's bank kept
         if rec.dao_zernike is not None:
             summary["dao_zernike_per_block"] = np.asarray(rec.dao_zernike).tolist()
+        fit = getattr(rec, "dao_fit_px", None)  # the last shift fit's residual, pixels
+        if fit is not None:
+            summary["dao_fit_px_per_block"] = [[float(v) if np.isfinite(v) else None
+                                                for v in row] for row in np.asarray(fit)]
     if provenance is not None:
         summary["provenance"] = provenance
     atomic_write_text(out / "summary.json", json.dumps(summary, indent=1, default=str))
