@@ -56,6 +56,18 @@ finally:
 """
 
 
+def modes() -> list[str]:
+    """The modes to run: every one of :data:`MODES`, or those named in ``STREAM_MODES``
+    (comma-separated, e.g. ``default``: a re-measurement of one row, ``rerun.py stream``)."""
+    import os
+
+    names = [m for m in os.environ.get("STREAM_MODES", "").split(",") if m] or list(MODES)
+    unknown = [m for m in names if m not in MODES]
+    if unknown:
+        raise SystemExit(f"STREAM_MODES: unknown mode(s) {unknown}; choose from {list(MODES)}")
+    return names
+
+
 def _write_tiled_store(path: Path, small: np.ndarray, shape: tuple[int, int], cfg,
                        var: tuple[float, float]) -> None:
     """A (nnum, nnum, *shape) zarr store of ``small`` tiled periodically plus Gaussian noise of
@@ -130,11 +142,11 @@ def run(quick: bool = False) -> list[dict]:
         _write_tiled_store(store, clean, shape, cfg, var)
         write_s = time.perf_counter() - t0
         rows = []
-        for mode in MODES:
+        for mode in modes():
             rows.append(_reconstruct_row(store, work / f"result-{mode}", mode, case, cfg, cap,
                                          truth, shape, image_shape, write_s, sigma, var))
             if not quick:
-                _write_partial(rows, len(rows) < len(MODES))
+                _write_partial(rows, len(rows) < len(modes()))
         return rows
     finally:
         shutil.rmtree(work, ignore_errors=True)

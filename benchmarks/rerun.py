@@ -1,7 +1,8 @@
 """Re-measure part of a full benchmark run and merge it into the committed JSON.
 
 ``python benchmarks/rerun.py scan_period`` (with ``SCAN_PERIOD_BUDGETS`` / ``SCAN_PERIOD_FOCUS``)
-or ``python benchmarks/rerun.py ed_fig4`` (with ``ED_FIG4_LEVELS``; the cases are measured
+or ``python benchmarks/rerun.py stream`` (with ``STREAM_MODES``, e.g. ``default``) or
+``python benchmarks/rerun.py ed_fig4`` (with ``ED_FIG4_LEVELS``; the cases are measured
 afresh in a temporary cases file, or in ``ED_FIG4_CASES`` if set, which a repeated run
 resumes) runs the benchmark's ``run()`` on the current code, replaces the committed rows it
 re-measured (same key: every setting of the row), marks them ``"remeasured": True``, keeps the
@@ -31,6 +32,9 @@ SPECS = {
     "ed_fig4": {"key": ("scene", "rms", "draw", "size", "mode"),
                 "metrics": ("psnr", "ssim", "residual_rms"), "summary": "summary",
                 "plot": "figure", "figure": "ed_fig4.png"},
+    "stream": {"key": ("sensor_px", "solver"),
+               "metrics": ("wall_s", "recon_s", "peak_rss_gb", "ssim_crop", "cpu_s"),
+               "summary": None, "plot": None, "figure": None},
 }
 
 
@@ -77,13 +81,16 @@ def main(name: str) -> int:
             os.environ["ED_FIG4_CASES"] = str(Path(tmp) / "cases.jsonl")
         new_rows = module.run(quick=False)
     rows = merge(old["rows"], new_rows, spec["key"], spec["metrics"])
-    getattr(module, spec["plot"])(rows, HERE / "results" / spec["figure"])
-    rows += getattr(module, spec["summary"])(rows)
+    if spec["plot"] is not None:
+        getattr(module, spec["plot"])(rows, HERE / "results" / spec["figure"])
+    if spec["summary"] is not None:
+        rows += getattr(module, spec["summary"])(rows)
     payload = dict(old, rows=rows, rerun={"date": time.strftime("%Y-%m-%d"),
                                           "seconds": time.perf_counter() - t0,
                                           "environment": {k: v for k, v in os.environ.items()
                                                           if k.startswith(("SCAN_PERIOD_",
-                                                                           "ED_FIG4_LEVELS"))}})
+                                                                           "ED_FIG4_LEVELS",
+                                                                           "STREAM_MODES"))}})
     atomic_write_text(path, json.dumps(payload, indent=2, default=float))
     for r in rows:
         if r.get("remeasured") or "summary" in r:

@@ -13,7 +13,7 @@ CFG = SystemConfig()
 
 
 def test_nonuniform_blocks_reads_the_threshold_and_skips_blocks_without_dao():
-    fits = np.array([[0.1, np.nan], [0.31, 2.0]])
+    fits = np.array([[0.1, np.nan], [0.51, 2.0]])
     assert nonuniform_blocks(fits) == [(1, 0), (1, 1)]
     assert nonuniform_blocks(fits, threshold=1.0) == [(1, 1)]
     assert nonuniform_blocks(None) == []
@@ -27,10 +27,10 @@ def test_nonuniform_blocks_reads_the_threshold_and_skips_blocks_without_dao():
 
 def test_warn_dao_fit_warns_once_naming_the_blocks():
     with pytest.warns(UserWarning, match=r"up to 2\.00 px .* 2 of 4 blocks \(\(1, 0\), \(1, 1\)"):
-        assert warn_dao_fit(np.array([[0.1, 0.2], [0.5, 2.0]]), (2, 2))
+        assert warn_dao_fit(np.array([[0.1, 0.2], [0.6, 2.0]]), (2, 2))
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        assert not warn_dao_fit(np.array([[0.1, 0.2], [0.25, np.nan]]), (2, 2))
+        assert not warn_dao_fit(np.array([[0.1, 0.2], [0.45, np.nan]]), (2, 2))
         assert not warn_dao_fit(None, (2, 2))
 
 

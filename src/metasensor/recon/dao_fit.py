@@ -3,14 +3,15 @@
 Multisite DAO (Wu et al. 2022, Methods: "We assume the aberration is uniform in each block")
 fits one wavefront's gradient to the shifts its views measure against the current PSF bank
 (:func:`metasensor.dao.wavefront.fit_shifts`). Where the block is isoplanatic the shifts are
-that gradient up to the measurement noise, and the last update's residual stays near a tenth of
-a pixel. Where the aberration changes inside the block (an aberration that varies faster than
-the blocks), or the block holds objects at different depths (each view sees each at its own
-parallax), no single wavefront explains the shifts: the residual grows to about half a pixel
-and more, and the block's estimate is a compromise of its parts (the image there is sharp
-nowhere). The data say so, so :func:`warn_dao_fit` says it once per reconstruction, naming the
-blocks; the remedy is more, smaller blocks (or a given field aberration). The threshold and
-the residuals it separates: docs/decisions.md ("DAO's shift-fit residual").
+that gradient up to the measurement noise and the last update's residual stays at a tenth of a
+pixel or two. Where the aberration changes inside the block (it varies faster than the blocks)
+no single wavefront explains the shifts: the residual grows towards a pixel and more, and the
+block's estimate is a compromise of its parts. :func:`warn_dao_fit` says so once per
+reconstruction, naming the blocks; the remedy is more, smaller blocks (or a given field
+aberration). What the residual does not see: objects at different depths in one block (each
+layer shifts the views linearly in the pupil coordinate, and so does their mixture: DAO fits a
+compromise defocus with a small residual). The threshold and the residuals it separates:
+docs/decisions.md ("DAO's shift-fit residual").
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ __all__ = ["FIT_WARN_PX", "nonuniform_blocks", "warn_dao_fit"]
 
 #: r.m.s. residual (pixels) of DAO's last shift fit above which a block is reported as not
 #: isoplanatic (why this value: docs/decisions.md, "DAO's shift-fit residual")
-FIT_WARN_PX = 0.3
+FIT_WARN_PX = 0.5
 
 
 def nonuniform_blocks(fits, threshold: float = FIT_WARN_PX) -> list[tuple[int, int]]:
@@ -79,7 +80,7 @@ def warn_dao_fit(fits, grid: tuple[int, int], threshold: float = FIT_WARN_PX) ->
     warnings.warn(
         f"DAO's one-wavefront fit left up to {worst:.2f} px r.m.s. of the view shifts "
         f"unexplained in {len(bad)} of {grid[0] * grid[1]} blocks ({shown}; an isoplanatic "
-        f"block leaves about 0.1 px): the aberration changes inside those blocks or they hold "
-        f"objects at different depths, so their estimate is a compromise; use more blocks "
-        f"than {grid[0]}x{grid[1]} or give the field aberration", UserWarning, stacklevel=4)
+        f"block leaves 0.05-0.25 px): the aberration changes inside those blocks, so their "
+        f"estimate is a compromise of it; use more blocks than {grid[0]}x{grid[1]} or give "
+        f"the field aberration", UserWarning, stacklevel=4)
     return True
