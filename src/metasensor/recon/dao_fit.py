@@ -4,13 +4,15 @@ Multisite DAO (Wu et al. 2022, Methods: "We assume the aberration is uniform in 
 fits one wavefront's gradient to the shifts its views measure against the current PSF bank
 (:func:`metasensor.dao.wavefront.fit_shifts`). Where the block is isoplanatic the shifts are
 that gradient up to the measurement noise and the last update's residual stays at a tenth of a
-pixel or two. Where the aberration changes inside the block (it varies faster than the blocks)
-no single wavefront explains the shifts: the residual grows towards a pixel and more, and the
-block's estimate is a compromise of its parts. :func:`warn_dao_fit` says so once per
-reconstruction, naming the blocks; the remedy is more, smaller blocks (or a given field
-aberration). What the residual does not see: objects at different depths in one block (each
-layer shifts the views linearly in the pupil coordinate, and so does their mixture: DAO fits a
-compromise defocus with a small residual). The threshold and the residuals it separates:
+pixel or two. Where the aberration changes inside the block in its high orders (it varies faster
+than the blocks, as a wrap or a turbulent layer near the pupil does) no single wavefront
+explains the shifts: the residual grows towards a pixel and more, and the block's estimate is a
+compromise of its parts. :func:`warn_dao_fit` says so once per reconstruction, naming the
+blocks; the remedy is more, smaller blocks (or a given field aberration). What the residual does
+not see: a smooth change across the block (the shifts of a linearly changing astigmatism average
+to the mean wavefront's gradient) and objects at different depths in one block (each layer
+shifts the views linearly in the pupil coordinate, and so does their mixture): DAO then fits the
+block's mean with a small residual. The threshold and the residuals it separates:
 docs/decisions.md ("DAO's shift-fit residual").
 """
 
