@@ -10,10 +10,11 @@ explains the shifts: the residual grows towards a pixel and more, and the block'
 compromise of its parts. :func:`warn_dao_fit` says so once per reconstruction, naming the
 blocks; the remedy is more, smaller blocks (or a given field aberration). What the residual does
 not see: a smooth change across the block (the shifts of a linearly changing astigmatism average
-to the mean wavefront's gradient) and objects at different depths in one block (each layer
-shifts the views linearly in the pupil coordinate, and so does their mixture): DAO then fits the
-block's mean with a small residual. The threshold and the residuals it separates:
-docs/decisions.md ("DAO's shift-fit residual").
+to the mean wavefront's gradient), nor objects at different depths in one block whose wavefronts
+differ by defocus alone (each layer shifts the views linearly in the pupil coordinate, and so
+does their mixture): DAO then fits the block's mean with a small residual. Depths mixed behind a
+strong high-order aberration (a near object behind plastic wrap) it does see. The threshold and
+the residuals it separates: docs/decisions.md ("DAO's shift-fit residual").
 """
 
 from __future__ import annotations
@@ -82,7 +83,7 @@ def warn_dao_fit(fits, grid: tuple[int, int], threshold: float = FIT_WARN_PX) ->
     warnings.warn(
         f"DAO's one-wavefront fit left up to {worst:.2f} px r.m.s. of the view shifts "
         f"unexplained in {len(bad)} of {grid[0] * grid[1]} blocks ({shown}; an isoplanatic "
-        f"block leaves 0.05-0.25 px): the aberration changes inside those blocks, so their "
-        f"estimate is a compromise of it; use more blocks than {grid[0]}x{grid[1]} or give "
-        f"the field aberration", UserWarning, stacklevel=4)
+        f"block leaves 0.05-0.25 px): the aberration changes inside those blocks (or they "
+        f"mix depths), so their estimate is a compromise; use more blocks than "
+        f"{grid[0]}x{grid[1]} or give the field aberration", UserWarning, stacklevel=4)
     return True
