@@ -99,9 +99,12 @@ def _simulate_bank(cfg, u0: torch.Tensor, os_, npos, lenslets, kf, dev,
                          dtype=torch.complex64, device=dev)
     pb = band_positions(cfg)
     if band_limited and pb < npos:
-        bank = _band_limited_bank(cfg, u0, mla, hz, os_, pb, lenslets)
+        periodic = _band_limited_bank(cfg, u0, mla, hz, os_, pb, lenslets)
         w = _dirichlet(lenslets * pb, pb, npos, kf).to(dev)
-        bank = torch.matmul(torch.matmul(w, bank), w.T)
+        bank = torch.empty((cfg.nnum, cfg.nnum, kf, kf), dtype=torch.float32, device=dev)
+        for u in range(cfg.nnum):  # one row of views at a time: a small intermediate
+            torch.matmul(torch.matmul(w, periodic[u]), w.T, out=bank[u])
+        del periodic
     else:
         bank = _direct_bank(cfg, u0, mla, hz, os_, npos, lenslets, kf)
     return (bank * (cfg.nnum / npos) ** 2).cpu().numpy()  # a point: (nnum/npos)² px of flux
