@@ -290,6 +290,8 @@ def gigapixel_cold_warm(quick: bool = False) -> list[dict]:
     ``gigapixel-cold`` computes every PSF bank (a new user's first run), ``gigapixel`` is the
     same run on the filled cache; each row with the 1-minute load average at its end (the
     machine is shared: wall time stretches with it, CPU seconds much less)."""
+    import torch
+
     from metasensor.scenarios import run_scenario
 
     settings = {"tile": 120} if quick else {}
@@ -302,7 +304,8 @@ def gigapixel_cold_warm(quick: bool = False) -> list[dict]:
                 with tempfile.TemporaryDirectory() as tmp:
                     row = summary_row(run_scenario("gigapixel", tmp, progress=False,
                                                    **settings))
-                rows.append({**row, "case": case, "load_average": os.getloadavg()[0]})
+                rows.append({**row, "case": case, "load_average": os.getloadavg()[0],
+                             "torch_threads": torch.get_num_threads()})
         finally:
             if old is None:
                 os.environ.pop("METASENSOR_CACHE", None)
