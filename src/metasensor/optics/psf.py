@@ -172,8 +172,8 @@ def view_psfs(cfg: SystemConfig, zernike=None, depth: float = 0.0, *,
     device : torch device (None: CUDA if available, else CPU).
     cache : True (default cache folder, see :mod:`metasensor.optics.cache`), False (bypass) or
         a folder path. The key hashes the code version, ``cfg.optical_digest()`` (not the scan),
-        the pupil amplitude and wavefront evaluated on a fixed 257² grid, depth, subsample, size
-        and oversample.
+        the pupil amplitude and wavefront evaluated on a fixed 257² grid, depth, subsample, size,
+        oversample, ``points`` and ``band_limited``.
     oversample : simulation samples per pixel per axis (odd multiple of subsample; default >= 3).
     points : odd number of point positions (and output samples) per lenslet pitch and axis, or
         None (``nnum · subsample``). Another value samples the bank on a grid of pitch
@@ -187,7 +187,7 @@ def view_psfs(cfg: SystemConfig, zernike=None, depth: float = 0.0, *,
         (the simulator's ``subsample = 3`` banks: 2.4× fewer propagations for the prototype);
         it differs from the direct evaluation (default) by the aliasing of the point field's
         light beyond its finite grid, a few 1e-5 of the bank's maximum
-        (:mod:`metasensor.optics.bank`). Part of the cache key.
+        (:mod:`metasensor.optics.bank`).
     """
     check_config(cfg)
     say_fallbacks(cfg)
