@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+import contextlib
 import warnings
 
 import numpy as np
 import torch
 
-__all__ = ["resolve_device", "address_space_limit", "as_tensor", "to_numpy", "check_memory"]
+__all__ = ["resolve_device", "address_space_limit", "as_tensor", "to_numpy", "check_memory",
+           "reproducible"]
 
 
 def address_space_limit() -> int | None:
@@ -84,3 +86,27 @@ def check_memory(nbytes: float, what: str) -> None:
     if nbytes > avail:
         raise MemoryError(f"{what} needs ~{nbytes / 2**30:.1f} GiB, more than the "
                           f"{avail / 2**30:.1f} GiB of memory available")
+
+
+@contextlib.contextmanager
+def reproducible(seed: int):
+    """Run the block on one torch thread with deterministic algorithms and torch's CPU random
+    state seeded by ``seed``, for bit-for-bit reproducible training; the caller's thread count,
+    determinism flag and random state come back afterwards (also on an exception).
+
+    Parameters
+    ----------
+    seed : int
+        ``torch.manual_seed`` inside the block.
+    """
+    threads, deterministic = torch.get_num_threads(), torch.are_deterministic_algorithms_enabled()
+    torch.set_num_threads(1)
+    torch.use_deterministic_algorithms(True)
+    try:
+        with torch.random.fork_rng(devices=[]):
+            torch.manual_seed(seed)
+            yield
+    finally:
+        torch.set_num_threads(threads)
+        torch.use_deterministic_algorithms(deterministic)
+

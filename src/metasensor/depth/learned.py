@@ -20,12 +20,9 @@ evaluation scenes.
 
 from __future__ import annotations
 
-import io
 from dataclasses import dataclass
-from importlib import resources
 from pathlib import Path
 
-import numpy as np
 import torch
 from torch import nn
 
@@ -103,15 +100,10 @@ class EdgeNet(nn.Module):
 
 def save_refiner(model: EdgeNet, path: Path) -> None:
     """Write ``model``'s parameters and buffers as float32 arrays (``.npz``, no pickle),
-    atomically."""
-    from metasensor.io.atomic import atomic_write_bytes
+    atomically (:func:`metasensor.io.weights.save_state`)."""
+    from metasensor.io.weights import save_state
 
-    arrays = {k: v.detach().cpu().numpy().astype(np.float32) for k, v in model.state_dict().items()}
-    arrays["_features"] = np.array(model.features)
-    arrays["_hidden"] = np.array(model.hidden)
-    buf = io.BytesIO()
-    np.savez(buf, **arrays)
-    atomic_write_bytes(Path(path), buf.getvalue())
+    save_state(model, path, features=model.features, hidden=model.hidden)
 
 
 _CACHE: dict[str, EdgeNet] = {}
@@ -120,15 +112,15 @@ _CACHE: dict[str, EdgeNet] = {}
 def load_refiner(path: str | Path | None = None) -> EdgeNet:
     """The network with the weights in ``path`` (default: the shipped :data:`WEIGHTS`), in eval
     mode, float32, on the CPU."""
+    from metasensor.io.weights import packaged_file, read_state
+
     if path is None:
-        src = resources.files("metasensor.depth").joinpath("data", WEIGHTS)
-        with resources.as_file(src) as p:
+        with packaged_file("metasensor.depth", WEIGHTS) as p:
             return load_refiner(p)
     key = str(Path(path).resolve())
     if key not in _CACHE:
-        with np.load(Path(path), allow_pickle=False) as z:
-            model = EdgeNet(int(z["_features"]), int(z["_hidden"]))
-            state = {k: torch.from_numpy(np.array(z[k])) for k in z.files if not k.startswith("_")}
+        sizes, state = read_state(path)
+        model = EdgeNet(sizes["features"], sizes["hidden"])
         model.load_state_dict(state)
         _CACHE[key] = model.eval().float()
     return _CACHE[key]

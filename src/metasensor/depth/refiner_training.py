@@ -171,16 +171,10 @@ def train(features: np.ndarray, labels: np.ndarray, weights: np.ndarray, steps: 
     if not (len(features) == len(labels) == len(weights) > 0):
         raise ValueError(f"need as many labels and weights as samples (> 0), got "
                          f"{len(features)}, {len(labels)}, {len(weights)}")
-    threads, deterministic = torch.get_num_threads(), torch.are_deterministic_algorithms_enabled()
-    torch.set_num_threads(1)
-    torch.use_deterministic_algorithms(True)
-    try:
-        with torch.random.fork_rng(devices=[]):
-            torch.manual_seed(seed)
-            return _fit(features, labels, weights, steps, batch, seed, log, width)
-    finally:
-        torch.set_num_threads(threads)
-        torch.use_deterministic_algorithms(deterministic)
+    from metasensor.backend import reproducible
+
+    with reproducible(seed):
+        return _fit(features, labels, weights, steps, batch, seed, log, width)
 
 
 def _fit(features, labels, weights, steps: int, batch: int, seed: int, log,

@@ -15,7 +15,6 @@ The denoiser works on images in [0, 1] with additive white Gaussian noise of sta
 
 from __future__ import annotations
 
-from importlib import resources
 from pathlib import Path
 
 import numpy as np
@@ -56,29 +55,23 @@ class DnCNN(nn.Module):
 
 
 def save_weights(model: DnCNN, path: Path) -> None:
-    """Write ``model``'s parameters as float32 arrays (``.npz``, no pickle) atomically."""
-    import io
+    """Write ``model``'s parameters as float32 arrays (``.npz``, no pickle) atomically
+    (:func:`metasensor.io.weights.save_state`)."""
+    from metasensor.io.weights import save_state
 
-    from metasensor.io.atomic import atomic_write_bytes
-
-    arrays = {k: v.detach().cpu().numpy().astype(np.float32) for k, v in model.state_dict().items()}
-    arrays["_depth"] = np.array(model.depth)
-    arrays["_features"] = np.array(model.features)
-    buf = io.BytesIO()
-    np.savez(buf, **arrays)
-    atomic_write_bytes(Path(path), buf.getvalue())
+    save_state(model, path, depth=model.depth, features=model.features)
 
 
 def load_denoiser(path: str | Path | None = None) -> DnCNN:
     """The network with weights from ``path`` (default: the shipped :data:`WEIGHTS`), in eval
     mode, float32, on the CPU."""
+    from metasensor.io.weights import packaged_file, read_state
+
     if path is None:
-        src = resources.files("metasensor.priors").joinpath("data", WEIGHTS)
-        with resources.as_file(src) as p:
+        with packaged_file("metasensor.priors", WEIGHTS) as p:
             return load_denoiser(p)
-    with np.load(Path(path), allow_pickle=False) as z:
-        model = DnCNN(int(z["_depth"]), int(z["_features"]))
-        state = {k: torch.from_numpy(np.array(z[k])) for k in z.files if not k.startswith("_")}
+    sizes, state = read_state(path)
+    model = DnCNN(sizes["depth"], sizes["features"])
     model.load_state_dict(state)
     return model.eval().float()
 

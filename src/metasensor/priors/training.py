@@ -73,17 +73,11 @@ def train(steps: int = 800, images: int = 400, size: int = 96, batch: int = 16,
     -------
     DnCNN
     """
-    threads, deterministic = torch.get_num_threads(), torch.are_deterministic_algorithms_enabled()
-    torch.set_num_threads(1)
-    torch.use_deterministic_algorithms(True)
-    try:
-        with torch.random.fork_rng(devices=[]):
-            torch.manual_seed(seed)
-            return _fit(make_set(images, size, seed), steps, batch, patch,
-                        DnCNN(depth, features), seed, log)
-    finally:  # the caller's settings come back
-        torch.set_num_threads(threads)
-        torch.use_deterministic_algorithms(deterministic)
+    from metasensor.backend import reproducible
+
+    with reproducible(seed):  # the caller's settings come back
+        return _fit(make_set(images, size, seed), steps, batch, patch, DnCNN(depth, features),
+                    seed, log)
 
 
 def _fit(data: np.ndarray, steps: int, batch: int, patch: int, model: DnCNN, seed: int,
