@@ -90,8 +90,9 @@ def test_estimate_depth_applies_the_refiner_last(small_scene):
         res = ms.estimate_depth(sv.views, sv.config, view_mask=np.ones((5, 5), bool),
                                 refiner=EdgeRefiner())
     expected = refine_edges(*record, EdgeRefiner()).numpy()
-    assert np.array_equal(res.disparity, expected)
-    assert not np.array_equal(res.disparity, record[3].numpy())
+    # equal up to the float rounding that the thread count changes (1e-7 with two threads)
+    np.testing.assert_allclose(res.disparity, expected, rtol=0, atol=1e-5)
+    assert np.abs(res.disparity - record[3].numpy()).max() > 0.5  # it moved edge pixels
 
 
 def test_training_is_reproducible(small_scene, tmp_path):
