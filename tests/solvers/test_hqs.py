@@ -113,16 +113,22 @@ def test_inputs_are_not_modified_and_bad_parameters_are_named(bank):
     assert not zero.estimate.any()
 
 
+def _mismatched_bank(bank):
+    """The used views' bank of 0.6 λ defocus and 0.4 λ coma (Noll 4 and 7), ``bank``'s size: a
+    bank that does not fit data made with ``bank``."""
+    cfg = ms.SystemConfig()
+    z = np.zeros(11)
+    z[3], z[6] = 0.6, 0.4
+    return np.asarray(ms.view_psfs(cfg, zernike=z, size=bank.shape[-1]),
+                      np.float32)[cfg.view_mask()]
+
+
 def test_model_error_bounds_the_data_weight(bank):
     # Data made with a defocused, comatic bank (0.6 / 0.4 waves), reconstructed with the ideal
     # one on a padded window at 30 dB. A data weight from the noise alone explodes (measured
     # r.m.s. error 5.5 on the 0-1 chart, max 33); bounded by the misfit of the nearly
     # unregularised fit (the default) it does not (0.283), and beats Richardson-Lucy (0.298).
-    cfg = ms.SystemConfig()
-    z = np.zeros(11)
-    z[3], z[6] = 0.6, 0.4
-    wrong = np.asarray(ms.view_psfs(cfg, zernike=z, size=bank.shape[-1]),
-                       np.float32)[cfg.view_mask()]
+    wrong = _mismatched_bank(bank)
     g = make_geometry((S, S), 3, bank.shape[-1] // 2, pad=True)
     truth = torch.from_numpy(resolution_chart(g.domain[0]))
     clean = PhaseSpaceOperator(wrong, g, device="cpu").forward(truth)
@@ -231,11 +237,7 @@ def test_data_weight_fit_is_skipped_only_where_the_start_fits_within_the_noise(b
     # (0.6 λ defocus, 0.4 λ coma) the misfit exceeds the noise and the fit is made.
     from metasensor.solvers.hqs import _data_weight
 
-    cfg = ms.SystemConfig()
-    z = np.zeros(11)
-    z[3], z[6] = 0.6, 0.4
-    wrong = np.asarray(ms.view_psfs(cfg, zernike=z, size=bank.shape[-1]),
-                       np.float32)[cfg.view_mask()]
+    wrong = _mismatched_bank(bank)
     for y_bank, fits in ((None, True), (wrong, False)):
         op, mask, y, unit, smooth, aty, calls = _masked_setup(bank, y_bank)
         opts = HQSOptions()
