@@ -19,13 +19,14 @@ Two evaluations of the same bank:
   periodic bank, one matrix product per axis and view. For the simulator's ``subsample = 3``
   bank of the prototype (45 positions per pitch) P = 29: 2.4× fewer propagations. It is not
   bit-for-bit the direct evaluation: ``U0`` is held on a finite grid, and the light cut off
-  at the grid's edge adds frequencies beyond the band, which the P positions alias (a few
-  1e-5 of the bank's maximum; ``tests/optics/test_bank_speedups.py`` bounds it).
+  at the grid's edge adds frequencies beyond the band, which the P positions alias
+  (``tests/optics/test_bank_speedups.py`` bounds the difference).
 
 The band-limited path runs its FFTs on CPU in ``scipy.fft`` (pocketfft, on torch's intra-op
-thread count), about twice as fast as torch's CPU FFT at these odd, 3- and 5-smooth sizes; on
-CUDA in torch. The direct path keeps torch's FFT, so its banks stay bit-for-bit those of
-earlier versions (scipy's rounding differs in the last bits).
+thread count), faster than torch's CPU FFT at these odd, 3- and 5-smooth sizes (measured:
+docs/decisions.md, "the gigapixel demo cold"); on CUDA in torch. The direct path keeps torch's
+FFT, so its banks stay bit-for-bit those of earlier versions (scipy's rounding differs in the
+last bits).
 """
 
 from __future__ import annotations
