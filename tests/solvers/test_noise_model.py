@@ -36,17 +36,19 @@ def bank():
 
 @pytest.mark.parametrize("light", [{"photons": 625.0, "read_noise": 3.0},
                                    {"photons": 2500.0, "read_noise": 5.0},
-                                   {"snr_db": 30.0}])
+                                   {"snr_db": 30.0}, {"snr_db": 30.0, "seed": 1}])
 def test_fit_recovers_the_simulators_gain_and_read_noise(light):
     # Stated tolerance: a within 5 %; the variance at the median fitted level within 5 % and at
     # every fitted level within 15 % of the truth (b alone is loosely determined where photon
     # noise dominates: at 30 dB the read noise is 1 % of the variance at the mean level).
-    # Measured: a 2.2 / 1.2 / 1.6 % off; b 390 vs 386, 54 vs 67, 6 vs 19 DN²; worst level
-    # 2 / 10 / 12 %.
-    # the capture on the CPU on every machine: the noise draw depends on the views' last digits,
-    # which another device's rounding changes (a CUDA capture drew a worst level of 16 %)
-    cap = ms.simulate(load_scene("camera", 240), ms.SystemConfig(), seed=0, comparison=False,
-                      device="cpu", **light)
+    # Measured (seed 0): a 2.1 / 2.0 / 1.9 % off; b 418 vs 386, 62 vs 67, 16 vs 19 DN²; worst
+    # level 2 / 5 / 2 %. Seed 1 at 30 dB was 16 % at the darkest level before each bin's variance
+    # was re-measured under the fitted line (a wide dark bin is a scale mixture); now 3 %.
+    # the capture on the CPU on every machine (the noise draw depends on the views' last digits,
+    # which another device's rounding changes)
+    level = {k: v for k, v in light.items() if k != "seed"}
+    cap = ms.simulate(load_scene("camera", 240), ms.SystemConfig(), seed=light.get("seed", 0),
+                      comparison=False, device="cpu", **level)
     true = PoissonGaussian.from_metadata(cap.noise)
     assert true.a == pytest.approx(cap.noise.gain)
     fit = fit_poisson_gaussian(cap.views)

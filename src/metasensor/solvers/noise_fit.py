@@ -15,6 +15,9 @@ view samples (each one sensor pixel, noise independent between samples):
 3. per bin (equal counts along ``m``): the robust variance ``(1.4826·MAD(d))²``;
 4. the line ``a·m + b`` through the bins' (level, variance) by robust least squares (SciPy's
    ``least_squares``, soft-L1 loss, each bin's residual divided by its standard error).
+5. twice more: each bin's variance re-measured with every sample's detail divided by its σ
+   under the fitted line (a bin spanning levels of different variance, as the sparse dark end
+   does, is a scale mixture whose MAD understates the mean variance), and the line refitted.
 
 The fit is refused (one-line ValueError) with too few usable bins or a negative slope, and
 warns once where ``a`` is poorly determined (the levels span too little).
@@ -151,8 +154,13 @@ def _statistics(stack: np.ndarray):
     return d[inner][keep], m[inner][keep], g[inner][keep]
 
 
-def _bins(d, m, g, options: NoiseFitOptions):
-    """(level, robust variance, count) of each bin with enough smooth samples."""
+def _bins(d, m, g, options: NoiseFitOptions, line: tuple[float, float] | None = None):
+    """(level, robust variance, count) of each bin with enough smooth samples.
+
+    With ``line`` = (a, b), each sample's detail is first divided by its predicted σ
+    ``sqrt(a·m + b)`` and the bin's variance is the prediction at the bin's mean level times the
+    robust variance of those ratios: a bin spanning levels of different variance (the sparse
+    dark end) is a scale mixture, whose MAD understates its mean variance."""
     order = np.argsort(m, kind="stable")
     out = []
     for idx in np.array_split(order, options.bins):
@@ -161,9 +169,15 @@ def _bins(d, m, g, options: NoiseFitOptions):
         smooth = idx[g[idx] <= np.quantile(g[idx], options.smooth_quantile)]
         if smooth.size < options.min_samples:
             continue
-        dv = d[smooth]
+        level = float(m[smooth].mean())
+        if line is None:
+            dv, unit = d[smooth], 1.0
+        else:
+            floor = 1e-6 * max(line[0] * level + line[1], 1e-30)
+            dv = d[smooth] / np.sqrt(np.maximum(line[0] * m[smooth] + line[1], floor))
+            unit = max(line[0] * level + line[1], floor)
         mad = float(np.median(np.abs(dv - np.median(dv))))
-        out.append((float(m[smooth].mean()), (MAD_SIGMA * mad) ** 2, smooth.size))
+        out.append((level, unit * (MAD_SIGMA * mad) ** 2, smooth.size))
     return np.array(out, dtype=np.float64).reshape(-1, 3)
 
 
@@ -208,6 +222,11 @@ def fit_poisson_gaussian(views, options: NoiseFitOptions = NoiseFitOptions()) ->
                          "too textured)")
     levels, variances, counts = bins.T
     a, b, a_err, b_err = _line(levels, variances, counts)
+    for _ in range(2):  # the bins' variances re-measured under the fitted line
+        if not a > 0:
+            break
+        levels, variances, counts = _bins(d, m, g, options, (a, max(b, 0.0))).T
+        a, b, a_err, b_err = _line(levels, variances, counts)
     if not a > 0:
         raise ValueError(f"noise fit unreliable: the variance falls with the level (slope "
                          f"{a:.3g}); the views do not follow a Poisson-Gaussian model")
