@@ -73,6 +73,10 @@ class Reconstruction:
     dao_fit_px : numpy.ndarray or None
         ``(by, bx)`` r.m.s. residual (pixels) of DAO's last shift fit per block (NaN: no DAO
         there; None: no DAO): :mod:`metasensor.recon.dao_fit`.
+    depth_layers : list
+        ``[by][bx]`` -> the disparities (view pixels per view step, relative to the block's
+        wavefront) of the depth layers the block was solved with (``depth_layers`` option;
+        empty: one bank).
     """
 
     image: Any
@@ -93,6 +97,7 @@ class Reconstruction:
     dao_zernike: np.ndarray | None = None
     noise_model: Any = None
     dao_fit_px: np.ndarray | None = None
+    depth_layers: list = field(default_factory=list)
 
     def __repr__(self) -> str:  # the arrays by shape and dtype, not their values
         from metasensor.summary import short_repr
@@ -153,6 +158,10 @@ def _check_call(cfg, method: str, zernike, field_zernike, opts: ReconOptions) ->
     if opts.space_variant and (method in ("wave", "geometric") or opts.psf is not None):
         raise ValueError("space_variant builds banks at the blocks' corners from the aberration: "
                          "use it with method='isa' and no psf")
+    if opts.depth_layers != "off" and (opts.psf is not None or opts.space_variant
+                                       or opts.register or method == "geometric"):
+        raise ValueError("depth_layers builds each layer's bank from the block's Noll vector: "
+                         "not with psf, space_variant, register or method='geometric'")
     if opts.psf is not None and (field_zernike is not None or (
             zernike is not None and np.any(np.asarray(zernike, dtype=float)))):
         raise ValueError("psf is a complete PSF bank, so zernike/field_zernike would be ignored: "
@@ -252,6 +261,9 @@ def _tasks(views, cfg: SystemConfig, method: str, grid, zern, opts: ReconOptions
     ship = not local and isinstance(views, np.ndarray)  # a cluster gets windows, not the stack
     gate = threading.Semaphore(1) if local and (opts.num_workers or 1) > 1 else None
     d = cfg.scan_step_px
+    from metasensor.recon.layers import resolve_depth_layers
+
+    layers = resolve_depth_layers(opts.depth_layers)
     out = []
     for b in plan["blocks"]:
         sy, sx = b.window_samples(d)
@@ -260,7 +272,7 @@ def _tasks(views, cfg: SystemConfig, method: str, grid, zern, opts: ReconOptions
             uv=plan["uv"], zernike=zern[b.index], solver=plan["solver"], dao=dao, psf=opts.psf,
             psf_fn=opts.psf_fn, register=bool(opts.register), pad=opts.pad,
             dao_negligible=float(opts.dao_negligible or 0.0),
-            probe_samples=int(opts.dao_probe_samples), setup_gate=gate,
+            probe_samples=int(opts.dao_probe_samples), setup_gate=gate, layers=layers,
             device=plan["device"], windowed=ship, progress=plan["tick"] if local else None,
             corner_zernike=None if plan["corners"] is None else plan["corners"][b.index]))
     return out
@@ -308,6 +320,8 @@ def reconstruct(views, cfg: SystemConfig, method: str = "isa", zernike=None, fie
     solver = opts.resolved_solver(d)
     if opts.space_variant and solver != "hqs":
         raise ValueError(f"space_variant needs solver='hqs' (got {solver!r})")
+    if opts.depth_layers != "off" and solver != "hqs":
+        raise ValueError(f"depth_layers needs solver='hqs' (got {solver!r})")
     psf = _check_psf(opts.psf, cfg, opts)
     opts = ReconOptions.resolve(opts, {"psf": psf})
     shape = (views.shape[2] * d, views.shape[3] * d)
@@ -365,4 +379,4 @@ def _run(views, cfg, method, grid, zern, opts: ReconOptions, plan: dict) -> Reco
         dao_history=collect.dao, registration=collect.registration,
         registration_zernike=collect.reg_zernike, views_used=len(plan["uv"]),
         dao_applied=collect.applied, dao_zernike=collect.dao_zernike,
-        noise_model=plan["noise"], dao_fit_px=collect.dao_fit)
+        noise_model=plan["noise"], dao_fit_px=collect.dao_fit, depth_layers=collect.layers)

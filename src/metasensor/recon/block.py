@@ -50,6 +50,9 @@ class BlockTask:
     probe_samples : int
         With ``dao_negligible``: view samples per side of the sub-window the probe decides on
         (:func:`probe_window`); windows no larger are probed whole.
+    layers : DepthLayers or None
+        The depth-aware model's settings (:mod:`metasensor.recon.layers`): a block whose views
+        show two depth layers is solved with one bank per layer; None: one bank.
     setup_gate : threading.Semaphore or None
         Local runs of several blocks at once: held from the block's start to its solver's
         first step, so that no two blocks build their spectra at once (their peaks add up).
@@ -73,13 +76,15 @@ class BlockTask:
     dao_negligible: float = 0.0
     probe_samples: int = PROBE_SAMPLES
     setup_gate: Any = None
+    layers: Any = None  # DepthLayers: the depth-aware model (recon.layers); None: one bank
 
 
 @dataclass
 class BlockResult:
     """A block's region image ``(ry, rx)`` float32, its Noll vector (waves), the solver's and
-    DAO's histories, the registration's (r.m.s. shift per round, wavefront), and whether DAO's
-    estimate was applied (None: no DAO) and the estimate."""
+    DAO's histories, the registration's (r.m.s. shift per round, wavefront), whether DAO's
+    estimate was applied (None: no DAO) and the estimate, and the depth layers' disparities
+    relative to the block's wavefront (view pixels per view step; empty: one layer)."""
 
     block: Block
     image: np.ndarray
@@ -91,6 +96,7 @@ class BlockResult:
     dao_applied: bool | None = None
     dao_zernike: np.ndarray | None = None
     dao_fit_px: float | None = None
+    layers: tuple = ()
 
 
 def default_psfs(cfg: SystemConfig, zernike, device, size: int | None = None) -> np.ndarray:
@@ -311,6 +317,16 @@ def _reconstruct(task: BlockTask, started) -> BlockResult:
     if bank.ndim != 4 or bank.shape[:2] != (cfg.nnum, cfg.nnum):
         raise ValueError(f"psf bank must have shape (nnum, nnum, K, K) with nnum = {cfg.nnum}, "
                          f"got {bank.shape}")
+    if task.layers is not None:  # the depth-aware model: one bank per layer where it sees two
+        from metasensor.recon.layers import layered_operator
+
+        layered = layered_operator(task, window, zernike, rows, cols)
+        if layered is not None:
+            op, found = layered
+            res = _solve(task, op, window[rows, cols], zernike, dao_history, [], None, estimate,
+                         started)
+            return replace(res, dao_fit_px=fit,
+                           layers=tuple(float(v) for v in found.disparity))
     op, registration, reg_zernike = _operator(task, bank[rows, cols], window[rows, cols])
     res = _solve(task, op, window[rows, cols], zernike, dao_history, registration, reg_zernike,
                  estimate, started)

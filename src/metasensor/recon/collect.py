@@ -21,6 +21,7 @@ class Collector:
         self.dao = [[[] for _ in range(bx)] for _ in range(by)]
         self.registration = [[[] for _ in range(bx)] for _ in range(by)]
         self.applied = [[None] * bx for _ in range(by)]
+        self.layers = [[() for _ in range(bx)] for _ in range(by)]
         self.dao_zernike = None
         self.dao_fit = None
         from metasensor.dao.bank_registration import WAVEFRONT_MODES
@@ -37,6 +38,7 @@ class Collector:
         self.dao[iy][ix] = res.dao_history
         self.registration[iy][ix] = res.registration
         self.applied[iy][ix] = res.dao_applied
+        self.layers[iy][ix] = res.layers
         if res.dao_zernike is not None:
             if self.dao_zernike is None:
                 self.dao_zernike = np.zeros_like(self.zernike)

@@ -11,6 +11,7 @@ import numpy as np
 from metasensor.dao.estimate import DaoOptions
 from metasensor.phasespace.views import ORDERS
 from metasensor.recon.dao_choice import PROBE_SAMPLES
+from metasensor.recon.layers import resolve_depth_layers
 from metasensor.solvers.hqs import HQSOptions
 from metasensor.solvers.noise_model import PoissonGaussian
 
@@ -71,6 +72,14 @@ class ReconOptions:
         the operator (:mod:`metasensor.recon.space_variant`), instead of one bank at its
         centre: PSFs continuous across blocks for aberrations that change inside a block.
         ``method="isa"`` with the HQS solver only; about 4x the solve's cost. Default False.
+    depth_layers : str or DepthLayers
+        ``"off"`` (default: one bank per block) or ``"auto"`` / a
+        :class:`metasensor.recon.layers.DepthLayers` (its settings): a block whose views show
+        two depth layers (its disparity, the block's wavefront removed, splits in two) is
+        solved with one bank per layer, the block's wavefront plus the layer's defocus, blended
+        by the layers' soft masks inside the operator (:mod:`metasensor.recon.layers`); blocks
+        of one layer are reconstructed as with ``"off"``. Banks from a Noll vector only (no
+        ``psf``, ``space_variant``, ``register`` or geometric DAO), the HQS solver.
     dao : DaoOptions or None
         DAO's settings for ``method="wave"``/``"geometric"`` (its ``method`` is set from
         ``reconstruct``'s).
@@ -109,6 +118,7 @@ class ReconOptions:
     margin: int | None = None
     pad: bool = True
     space_variant: bool = False
+    depth_layers: Any = "off"
     dao: DaoOptions | None = None
     dao_negligible: float | None = None
     dao_probe_samples: int = PROBE_SAMPLES
@@ -147,6 +157,7 @@ class ReconOptions:
             raise TypeError("dao must be DaoOptions")
         if not isinstance(self.space_variant, bool):
             raise TypeError(f"space_variant must be True or False, got {self.space_variant!r}")
+        resolve_depth_layers(self.depth_layers)  # refuses anything else
         g = self.dao_negligible
         if g is not None and (isinstance(g, bool) or not (
                 isinstance(g, int | float | np.number) and math.isfinite(g) and g >= 0)):
