@@ -9,6 +9,7 @@ from metasensor.config import SystemConfig
 from metasensor.dao.banks import block_psfs, geometric_psfs, psf_bank
 from metasensor.dao.block import DaoBlock
 from metasensor.dao.estimate import DaoResult, estimate_block_aberration, run_dao
+from metasensor.dao.options import DaoOptions
 from metasensor.dao.wavefront import zernike_rms
 from metasensor.optics.zernike import random_zernike
 
@@ -362,9 +363,10 @@ def test_block_takes_a_psf_taller_than_wide(rng):
 
 
 def test_a_diverging_update_is_refused_with_one_warning(monkeypatch):
-    # an update whose wavefront sends rays beyond twice the largest shift DAO measures (20 waves
-    # of Noll 45: hundreds of pixels) is not applied: DAO stops, keeps the estimate before it
-    # and says so once (a plastic-wrap run grew 725-px PSF windows and 9 GB banks otherwise)
+    # an update whose wavefront sends rays beyond max_reach_px even for a quarter of it (80
+    # waves of Noll 45: 914 px, a quarter 228 px against 200) is not applied: DAO stops, keeps
+    # the estimate before it and says so once (a plastic-wrap run grew 725-px PSF windows and
+    # 9 GB banks otherwise)
     import metasensor.dao.estimate as est
     from metasensor.dao.banks import ray_reach_px
 
@@ -375,12 +377,39 @@ def test_a_diverging_update_is_refused_with_one_warning(monkeypatch):
 
     def wild(*args, **kwargs):
         fit = real(*args, **kwargs)
-        fit.zernike[44] = 20.0
+        fit.zernike[44] = 80.0
         return fit
 
     monkeypatch.setattr(est, "fit_shifts", wild)
-    assert ray_reach_px(cfg, np.eye(45)[44] * 20.0, cfg.view_mask()) > 100
+    assert ray_reach_px(cfg, np.eye(45)[44] * 20.0, cfg.view_mask()) > 200
     with pytest.warns(RuntimeWarning, match="DAO stopped after 0 update") as rec:
         res = run_dao(views, cfg, method="wave", max_iter=3, init=np.eye(45)[3] * 0.05)
     assert len(rec) == 1
     assert res.history == [] and np.allclose(res.zernike, np.eye(45)[3] * 0.05)
+
+
+def test_an_overshooting_update_is_shortened_to_the_reach(monkeypatch):
+    # an update whose whole step sends the rays beyond max_reach_px but a part of it does not
+    # (20 waves of Noll 45: 229 px against 100) is applied as the largest fraction within it
+    import metasensor.dao.estimate as est
+    from metasensor.dao.banks import ray_reach_px
+
+    cfg = SystemConfig(nnum=9, mla_pitch=41.4e-6, mla_focal=414e-6, scan=3)
+    bank = ms.view_psfs(cfg)
+    views, _ = synth_views(cfg, _scene(96 + bank.shape[-1]), bank, snr_db=40)
+    real = est.fit_shifts
+
+    def far(*args, **kwargs):
+        fit = real(*args, **kwargs)
+        fit.zernike[:] = 0.0
+        fit.zernike[44] = 20.0
+        return fit
+
+    monkeypatch.setattr(est, "fit_shifts", far)
+    res = run_dao(views, cfg, method="wave", max_iter=1, max_reach_px=100.0)
+    assert len(res.steps) == 1 and 0.4 < res.steps[0] < 0.45  # 100 / 229 = 0.437
+    reach = ray_reach_px(cfg, res.zernike, cfg.view_mask())
+    assert 99.0 < reach <= 100.0
+    assert res.history[0] == pytest.approx(20.0 * res.steps[0], rel=1e-9)
+    with pytest.raises(ValueError, match="max_reach_px"):
+        DaoOptions(max_reach_px=0.0)

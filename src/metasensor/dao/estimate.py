@@ -17,9 +17,12 @@ Alternate, starting from φ = ``init`` (or 0):
 4. fit the shifts by Zernike modes 4–45 plus a common offset (:mod:`metasensor.dao.wavefront`;
    each view weighted by the precision of its shift, not in the paper), add the fit to φ.
    Stop when the r.m.s. of the update is below ``tol`` (0 runs all) or after ``max_iter``
-   updates. An update whose wavefront would send the used views' rays beyond twice
-   ``max_shift_px`` (:func:`metasensor.dao.banks.ray_reach_px`) is not applied: DAO stops
-   there with one warning (a diverging estimate; not in the paper).
+   updates. An update whose wavefront would send the used views' rays beyond ``max_reach_px``
+   (:func:`metasensor.dao.banks.ray_reach_px`; it bounds the banks' windows) is shortened to
+   the largest fraction that keeps them within it (a trust region: a large aberration's first
+   fit can overshoot on textures whose shifts are partly aliased); where even ``MIN_STEP`` of
+   it would reach beyond, the update is not applied and DAO stops there with one warning (a
+   diverging estimate). Neither is in the paper.
 
 ``DaoResult.history`` holds the r.m.s. (waves, modes 4–45) of every update. Views used:
 ``cfg.view_mask()`` (or ``view_mask``), and, when a pupil amplitude is given, its lit views. Why
@@ -50,6 +53,9 @@ __all__ = ["DaoOptions", "DaoResult", "run_dao", "estimate_block_aberration", "d
 JMAX = 45
 MIN_SAMPLES = 8  # view samples per side a block needs for DAO
 MIN_VIEWS = 8  # used views DAO needs
+MIN_STEP = 0.25  # the shortest fraction of a fitted update applied within the rays' reach
+
+
 def gradient_shifts(phi: np.ndarray, matrix) -> np.ndarray:
     """Modelled view shifts (pixels) of the modes 4–45 of a Noll vector."""
     z = np.array(phi, dtype=np.float64)
@@ -131,6 +137,7 @@ class _Run:
     image: torch.Tensor | None = None
     say: Any = None  # callable(str): what the update is doing (the progress bar's postfix)
     rejected: float = 0.0  # ray reach (px) of an update refused as beyond DAO's range
+    steps: list = field(default_factory=list)  # fraction of each fitted update applied
 
     def tell(self, text: str) -> None:
         """Say what the update is doing (and the wavefront so far) on the progress bar."""
@@ -191,27 +198,50 @@ def _update(run: _Run) -> None:
         wts = wts / mean_w if mean_w > 0 else None
     fit = fit_shifts(np.nan_to_num(s_full), run.cfg, mask=used & ~clipped, modes=opts.modes,
                      weights=wts, matrix=run.matrix)
-    reach = ray_reach_px(run.cfg, run.phi + fit.zernike, used)
-    if reach > 2 * opts.max_shift_px:  # rays twice as far as any shift measured: a divergence
-        run.rejected = reach
+    step = _step_within_reach(run, fit.zernike)
+    if step is None:  # rays beyond DAO's reach even for a short step: a divergence
+        run.rejected = ray_reach_px(run.cfg, run.phi + fit.zernike, used)
         return
+    run.steps.append(step)
     run.fits.append(fit.residual_rms)
-    run.history.append(zernike_rms(fit.zernike, opts.modes))
-    run.phi = run.phi + fit.zernike
+    run.history.append(zernike_rms(step * fit.zernike, opts.modes))
+    run.phi = run.phi + step * fit.zernike
     run.estimates.append(run.phi.copy())
     run.shifts = np.nan_to_num(s_full)
     if opts.method == "geometric":
-        run.total = run.total + np.where(used[..., None], run.shifts - fit.tilt, 0.0)
+        run.total = run.total + step * np.where(used[..., None], run.shifts - fit.tilt, 0.0)
+
+
+def _step_within_reach(run: _Run, update: np.ndarray) -> float | None:
+    """The fraction of ``update`` to apply: 1 where the rays of ``phi + update`` stay within
+    ``max_reach_px``, else the largest fraction that keeps them there (bisection, to
+    1/1024), or None where that is below ``MIN_STEP`` (or the current estimate already
+    reaches beyond)."""
+    limit = run.opts.max_reach_px
+
+    def within(alpha: float) -> bool:
+        return ray_reach_px(run.cfg, run.phi + alpha * update, run.used) <= limit
+
+    if within(1.0):
+        return 1.0
+    if not within(MIN_STEP):
+        return None
+    lo, hi = MIN_STEP, 1.0
+    for _ in range(10):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if within(mid) else (lo, mid)
+    return lo
 
 
 def _warn_rejected(run: _Run) -> None:
-    """One warning: the last update was refused (its rays reach beyond twice the largest view
-    shift DAO measures), the estimate stays at the updates before it."""
+    """One warning: the last update was refused (even a quarter of it sends the rays beyond
+    ``max_reach_px``), the estimate stays at the updates before it."""
     import warnings
 
     warnings.warn(f"DAO stopped after {len(run.history)} update(s): the next estimate's rays "
-                  f"would reach {run.rejected:.0f} px, beyond twice the largest shift measured "
-                  f"({run.opts.max_shift_px:g} px); the estimate so far is kept",
+                  f"would reach {run.rejected:.0f} px, beyond max_reach_px "
+                  f"({run.opts.max_reach_px:g} px) even for a quarter of the update; the "
+                  "estimate so far is kept",
                   RuntimeWarning, stacklevel=3)
 
 
@@ -270,7 +300,7 @@ def run_dao(block_views, cfg: SystemConfig, options: DaoOptions | None = None, *
     image = None if run.image is None else to_numpy(run.image) * run.blk.scale
     return DaoResult(zernike=run.phi, history=run.history, shifts=shifts, method=opts.method,
                      residual_shifts=run.shifts, image=image, fits=run.fits,
-                     psf_size=run.size(run.phi), estimates=run.estimates)
+                     psf_size=run.size(run.phi), estimates=run.estimates, steps=run.steps)
 
 
 def estimate_block_aberration(block_views, cfg: SystemConfig, method: str = "wave", init=None,

@@ -42,6 +42,11 @@ class DaoOptions:
         λ of the views' Krishnan–Fergus deconvolutions (images scaled to [0, 1]; default 5e4).
     max_shift_px : float
         Largest view shift measured (pixels; default 50, the authors' limit).
+    max_reach_px : float
+        Farthest the estimate's rays may reach (pixels, :func:`metasensor.dao.banks.ray_reach_px`;
+        default 200): an update going beyond is shortened to stay within, or refused where even a
+        quarter of it would not. It bounds the banks' windows (about ``2·(reach + margin) + 1``
+        pixels) and so their memory.
     modes : tuple of int
         Noll modes fitted (default 4–45).
     chunk : int
@@ -67,6 +72,7 @@ class DaoOptions:
     tol: float = 0.1
     lam: float = DEFAULT_LAMBDA
     max_shift_px: float = 50.0
+    max_reach_px: float = 200.0
     modes: tuple = DAO_MODES
     chunk: int = 16
     psf_size: int | str | None = "auto"
@@ -88,6 +94,7 @@ class DaoOptions:
                              f"{self.inner}")
         _positive("lam", self.lam)
         _positive("max_shift_px", self.max_shift_px)
+        _positive("max_reach_px", self.max_reach_px)
         if not (isinstance(self.tol, int | float) and math.isfinite(self.tol) and self.tol >= 0):
             raise ValueError(f"tol must be a non-negative number of waves, got {self.tol!r}")
         if not (isinstance(self.chunk, int | np.integer) and self.chunk >= 1):
@@ -126,6 +133,9 @@ class DaoResult:
         K of the banks (None: ``view_psfs``' default window).
     estimates : list of numpy.ndarray
         φ ``(45,)`` after every update.
+    steps : list of float
+        The fraction of every fitted update applied: 1, or less where the whole update would
+        send the rays beyond twice ``max_shift_px`` (:func:`metasensor.dao.estimate.run_dao`).
     """
 
     zernike: np.ndarray
@@ -137,6 +147,7 @@ class DaoResult:
     fits: list[float] = field(default_factory=list)
     psf_size: int | None = None
     estimates: list[np.ndarray] = field(default_factory=list)
+    steps: list[float] = field(default_factory=list)
 
 
 def resolve_options(options: DaoOptions | None, settings: dict) -> DaoOptions:
