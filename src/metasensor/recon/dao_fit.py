@@ -13,7 +13,9 @@ not see: a smooth change across the block (the shifts of a linearly changing ast
 to the mean wavefront's gradient), nor objects at different depths in one block whose wavefronts
 differ by defocus alone (each layer shifts the views linearly in the pupil coordinate, and so
 does their mixture): DAO then fits the block's mean with a small residual. Depths mixed behind a
-strong high-order aberration (a near object behind plastic wrap) it does see. The threshold and
+strong high-order aberration (a near object behind plastic wrap) it does see. Shifts measured
+poorly raise it too, in an isoplanatic block: fine texture (grass) under a few waves, where the
+views' cross-correlations partly alias. The threshold and
 the residuals it separates: docs/decisions.md ("DAO's shift-fit residual").
 """
 
@@ -84,6 +86,7 @@ def warn_dao_fit(fits, grid: tuple[int, int], threshold: float = FIT_WARN_PX) ->
         f"DAO's one-wavefront fit left up to {worst:.2f} px r.m.s. of the view shifts "
         f"unexplained in {len(bad)} of {grid[0] * grid[1]} blocks ({shown}; an isoplanatic "
         f"block leaves 0.05-0.25 px): the aberration changes inside those blocks (or they "
-        f"mix depths), so their estimate is a compromise; use more blocks than "
+        f"mix depths, or their shifts are poorly measured: fine texture under a large "
+        f"aberration), so their estimate is a compromise; use more blocks than "
         f"{grid[0]}x{grid[1]} or give the field aberration", UserWarning, stacklevel=4)
     return True
