@@ -10,7 +10,8 @@ pixel belongs to the front, averaged over the eight rotations and mirrors of its
 is moved to the other layer (the mean of its neighbours on that layer) only where that layer's
 probability reaches ``EdgeRefiner.probability``, in ``EdgeRefiner.passes`` rounds (each on the
 map the previous one left); it chooses between values the map already holds and never invents
-a depth.
+a depth. On long straight edges the pixels of one run take the mean of their run's logits
+(:func:`metasensor.depth.edgeruns.pool_along_runs`, ``EdgeRefiner.run_length``).
 
 The weights ship as package data (``metasensor/depth/data/edge_refiner.npz``, float32 NumPy
 arrays, no pickle), trained by ``scripts/train_depth_refiner.py``
@@ -23,10 +24,13 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
 import torch
 from torch import nn
 
 from metasensor.depth.edgefeatures import CHANNELS, PATCH, edge_samples
+from metasensor.depth.edgeruns import pool_along_runs
+from metasensor.depth.edges import two_layer_pixels
 
 __all__ = ["WEIGHTS", "EdgeNet", "EdgeRefiner", "load_refiner", "refine_edges", "save_refiner"]
 
@@ -44,12 +48,16 @@ class EdgeRefiner:
         evidence); each round re-reads the evidence of the map the previous one left.
     weights : path of a weights file (``.npz`` written by :func:`save_refiner`); None: the
         shipped :data:`WEIGHTS`.
+    run_length : ``L`` of :func:`metasensor.depth.edgeruns.pool_along_runs`: samples on a
+        straight run of the edge at least ``2 L + 1`` px long take the mean logit of the run
+        within ``±2 L`` px; 0: every pixel decided on its own patch.
     """
 
     probability: float = 0.5
     jump: float = 1.5
     passes: int = 2
     weights: str | None = None
+    run_length: int = 24
 
     def __post_init__(self) -> None:
         p = self.probability
@@ -59,6 +67,8 @@ class EdgeRefiner:
             raise ValueError(f"jump must be a positive number, got {self.jump!r}")
         if not (isinstance(self.passes, int) and 1 <= self.passes <= 8):
             raise ValueError(f"passes must be an integer in [1, 8], got {self.passes!r}")
+        if not (isinstance(self.run_length, int) and 0 <= self.run_length <= 64):
+            raise ValueError(f"run_length must be an integer in [0, 64], got {self.run_length!r}")
         if self.weights is not None and not isinstance(self.weights, str | Path):
             raise TypeError(f"weights must be a path or None, got {type(self.weights).__name__}")
 
@@ -146,6 +156,7 @@ def refine_edges(views: torch.Tensor, au, av, disparity: torch.Tensor,
     neighbours on the other layer; other pixels unchanged.
     """
     out = disparity.clone()
+    amax = float(max(np.abs(np.asarray(au)).max(), np.abs(np.asarray(av)).max()))
     net = model if model is not None else load_refiner(options.weights)
     net = net.to(views.device)
     for _ in range(options.passes):
@@ -153,7 +164,13 @@ def refine_edges(views: torch.Tensor, au, av, disparity: torch.Tensor,
         if samples is None:
             break
         with torch.no_grad():
-            p = net.probability(samples.features)
+            p = net.probability(samples.features).clamp(1e-6, 1 - 1e-6)
+            if options.run_length > 0:
+                _, lo, hi, _ = two_layer_pixels(out, options.jump, amax)
+                logit = pool_along_runs(out, lo, hi, samples.ys, samples.xs,
+                                        torch.log(p / (1 - p)), options.run_length,
+                                        step=options.jump / (2 * amax))
+                p = torch.sigmoid(logit)
         to_front = ~samples.on_front & (p >= options.probability)
         to_back = samples.on_front & (1 - p >= options.probability)
         if not bool((to_front | to_back).any()):
