@@ -146,7 +146,8 @@ def test_model_error_bounds_the_data_weight(bank):
 
     samples, m = op.samples_and_mask(y, mask)
     unit = 2 * float(samples.sum()) / float(op.sensitivity(m.float()).sum())  # image mean 0.5
-    noise_only = hqs(op, y, mask, HQSOptions(lam=0.3 / (sigma / unit) ** 2)).estimate
+    noise_only = hqs(op, y, mask, HQSOptions(lam=0.3 / (sigma / unit) ** 2,
+                                             misfit_weights=None)).estimate  # one weight
     default = hqs(op, y, mask).estimate
     rl = richardson_lucy(op, y, mask).estimate
     assert err(default) < err(rl) < 0.5
@@ -249,3 +250,69 @@ def test_data_weight_fit_is_skipped_only_where_the_start_fits_within_the_noise(b
         lam_fit = _data_weight(op, smooth, aty, y, mask, unit, opts)
         assert skipped == fits
         assert lam_start == pytest.approx(lam_fit, rel=1e-9)
+
+
+def _jittered_views(bank, g, truth, rms_px: float, seed: int = 0):
+    """Views in which every view of every scan position (frame) has its own PSF shift (normal,
+    ``rms_px`` pixels per axis): the sub-aperture tilts of turbulence that changes during the
+    scan, which the static bank does not hold."""
+    from scipy.ndimage import shift
+
+    rows = torch.arange(g.grid[0])[:, None] % 5
+    cols = torch.arange(g.grid[1])[None, :] % 5
+    rng = np.random.default_rng(seed)
+    clean = torch.zeros((bank.shape[0], *g.grid))
+    for a in range(5):
+        for b in range(5):
+            offsets = rng.normal(0.0, rms_px, (bank.shape[0], 2))
+            moved = np.stack([shift(p, s, order=1) for p, s in zip(bank, offsets, strict=True)])
+            frame = (rows == a) & (cols == b)
+            clean[:, frame] = PhaseSpaceOperator(moved.astype(np.float32), g,
+                                                 device="cpu").forward(truth)[:, frame]
+    return clean
+
+
+def test_misfit_weights_only_where_the_model_does_not_fit(bank, monkeypatch):
+    # Default misfit_weights 1.1: where the nearly unregularised fit is within 1.1 x the noise
+    # (data that follow the bank) the solve is the global weight's, bit for bit; where it is
+    # not, the data term is weighted by the local misfit: a bank 0.6 / 0.4 λ off (model error
+    # on every edge) reads as the global weight (measured r.m.s. error 0.2871 vs 0.2879), and
+    # the Moon with every view of every frame moved by its own 3 px (turbulence that changes
+    # during the scan) gains (measured 0.0421 vs 0.0429; beta_max 64 here, to be quick).
+    import metasensor.solvers.hqs as hqs_module
+    from metasensor.simulation.scenes import natural_image
+
+    calls = []
+    real = hqs_module.misfit_weights
+    monkeypatch.setattr(hqs_module, "misfit_weights",
+                        lambda *a: calls.append(1) or real(*a))
+    quick = Continuation(beta_max=64.0)
+    g = make_geometry((30, 30), 3, bank.shape[-1] // 2, pad=True)
+    mask = torch.zeros(g.grid, dtype=torch.bool)
+    mask[g.sample_slices()] = True
+    oy, ox = g.offset
+    win = (slice(oy, oy + 90), slice(ox, ox + 90))
+    chart = torch.from_numpy(resolution_chart(g.domain[0]))
+    moon = torch.from_numpy(natural_image("moon", g.domain[0]).astype(np.float32))
+    moon = moon * (0.5 / float(moon.mean()))
+    op = PhaseSpaceOperator(bank, g, device="cpu")
+    cases = [(chart, op.forward(chart), False),
+             (chart, PhaseSpaceOperator(_mismatched_bank(bank), g, device="cpu").forward(chart),
+              True),
+             (moon, _jittered_views(bank, g, moon, 3.0), True)]
+    errors = []
+    for truth, clean, weighted in cases:
+        sigma = float(torch.sqrt((clean**2).mean() / 1e3))
+        gen = torch.Generator().manual_seed(0)
+        y = (clean + sigma * torch.randn(clean.shape, generator=gen)) * mask
+        del calls[:]
+        x = hqs(op, y, mask, HQSOptions(continuation=quick)).estimate
+        assert bool(calls) == weighted
+        one = hqs(op, y, mask, HQSOptions(continuation=quick, misfit_weights=None)).estimate
+        assert torch.equal(x, one) != weighted
+        errors.append([float(torch.sqrt(((v - truth)[win] ** 2).mean())) for v in (x, one)])
+    assert abs(errors[1][0] - errors[1][1]) < 0.005, errors
+    assert errors[2][0] < errors[2][1] - 0.0004, errors
+    for bad in (0.0, -1.0, True, float("nan"), "1.1"):
+        with pytest.raises(ValueError, match="misfit_weights"):
+            HQSOptions(misfit_weights=bad)

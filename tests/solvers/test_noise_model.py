@@ -20,7 +20,7 @@ from metasensor.simulation.noise import NoiseModel
 from metasensor.simulation.scenes import load_scene, resolution_chart
 from metasensor.solvers.hqs import HQSOptions, _weighted_normal, hqs
 from metasensor.solvers.noise_fit import NoiseFitOptions, fit_poisson_gaussian
-from metasensor.solvers.noise_model import PoissonGaussian, sample_weights
+from metasensor.solvers.noise_model import PoissonGaussian, misfit_weights, sample_weights
 from metasensor.solvers.richardson_lucy import RLOptions, richardson_lucy
 from metasensor.solvers.splitting import Continuation
 from recon_standin import one_torch_thread  # noqa: F401
@@ -133,7 +133,7 @@ def test_constant_weights_reduce_to_the_global_weight(bank):
     g, op, _, y, mask = _problem(bank, True)
     opts = {"continuation": Continuation(beta_max=64.0)}
     sigma = 4.0
-    ref = hqs(op, y, mask, HQSOptions(noise=sigma, **opts)).estimate
+    ref = hqs(op, y, mask, HQSOptions(noise=sigma, misfit_weights=None, **opts)).estimate
     const = hqs(op, y, mask, HQSOptions(noise_model=PoissonGaussian(0.0, sigma**2),
                                          **opts)).estimate
     assert torch.equal(ref, const)
@@ -211,3 +211,27 @@ def test_reconstruct_auto_fits_the_model_for_hqs_only():
     given = PoissonGaussian.from_metadata(cap.noise)
     assert ms.reconstruct(cap.views, cfg, solver="rl", iterations=1,
                           noise_model=given).noise_model is given
+
+
+def test_misfit_weights_follow_the_local_misfit_above_the_noise():
+    # var = max(noise², mean over the views of r²) per sample position, weights σ²/var with σ²
+    # their harmonic mean (mean 1 over observed positions), 0 where unobserved; the residual is
+    # not modified; a residual under the noise everywhere gives every weight exactly 1.
+    gen = torch.Generator().manual_seed(0)
+    r = 0.3 * torch.randn((9, 12, 12), generator=gen)
+    mask = torch.ones((12, 12), dtype=torch.bool)
+    mask[:, :2] = False
+    before = r.clone()
+    w, s2 = misfit_weights(r, mask, 1.0)
+    assert torch.equal(r, before) and w.shape == (12, 12) and w.dtype == torch.float32
+    assert s2 == pytest.approx(1.0) and torch.equal(w[mask], torch.ones(int(mask.sum())))
+    assert not w[~mask].any()
+    r[:, 5, 6] = 3.0  # one position the model misses by 3 x the noise
+    w, s2 = misfit_weights(r, mask, 1.0)
+    n = int(mask.sum())
+    assert s2 == pytest.approx(n / (n - 1 + 1 / 9))
+    assert float(w[5, 6]) == pytest.approx(s2 / 9) and float(w[0, 5]) == pytest.approx(s2)
+    assert float(w[mask].mean()) == pytest.approx(1.0, rel=1e-5)
+    for bad in (0.0, -1.0, float("nan"), float("inf")):
+        with pytest.raises(ValueError, match="noise"):
+            misfit_weights(r, mask, bad)

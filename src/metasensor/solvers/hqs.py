@@ -30,6 +30,12 @@ is weighted least squares, ``‖A x − y‖²_{MW}`` with ``W = σ²/var`` (mea
 start's prediction, so the noise of the data does not bias the weights), and σ² the weights'
 reference variance; the x-step is then never circular: PCG on ``AᵀMWA + μ(LᵀL + εI)``, still
 preconditioned by the circular unweighted solve.
+
+Model error (a bank that is an estimate, a wavefront or scene that moves during the scan) sits
+where the scene has structure, not everywhere as noise does: where the nearly unregularised
+fit's r.m.s. misfit exceeds ``misfit_weights`` times the noise, the data term is weighted by
+each sample position's own misfit in that fit
+(:func:`metasensor.solvers.noise_model.misfit_weights`), as above.
 """
 
 from __future__ import annotations
@@ -43,7 +49,7 @@ import torch
 from metasensor.phasespace.masked_normal import BandNormal
 from metasensor.phasespace.normal import FoldedNormal
 from metasensor.phasespace.operator import PhaseSpaceOperator
-from metasensor.solvers.noise_model import PoissonGaussian, sample_weights
+from metasensor.solvers.noise_model import PoissonGaussian, misfit_weights, sample_weights
 from metasensor.solvers.priors import GRADIENT, HyperLaplacian, Prior, Transform
 from metasensor.solvers.result import SolveResult
 from metasensor.solvers.splitting import Continuation, half_quadratic_splitting
@@ -90,6 +96,11 @@ class HQSOptions:
         floor of these products: ``docs/decisions.md``); 0: always ``cg`` iterations.
     init_reg : float
         Smoothness weight of the start, relative to AᵀA's largest diagonal (default 1e-2).
+    misfit_weights : float or None
+        Without a ``noise_model``: where the nearly unregularised fit's r.m.s. misfit exceeds
+        this many times the noise (the model does not fit the data), weigh each view-sample
+        position by its local misfit (module docstring; default 1.1, ``docs/decisions.md``);
+        None: one global weight always.
     """
 
     prior: Prior = HyperLaplacian(isotropic=True)
@@ -102,6 +113,7 @@ class HQSOptions:
     cg: int = 3
     cg_tol: float = 1e-4
     init_reg: float = 1e-2
+    misfit_weights: float | None = 1.1
 
     def __post_init__(self) -> None:
         if not isinstance(self.prior, Prior):
@@ -113,6 +125,10 @@ class HQSOptions:
             value = getattr(self, name)
             if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
                 raise ValueError(f"{name} must be > 0, got {value!r}")
+        mw = self.misfit_weights
+        if mw is not None and (isinstance(mw, bool) or not (
+                isinstance(mw, int | float) and math.isfinite(mw) and mw > 0)):
+            raise ValueError(f"misfit_weights must be a positive number or None, got {mw!r}")
         if not (isinstance(self.cg_tol, int | float) and 0 <= self.cg_tol < 1):
             raise ValueError(f"cg_tol must be in [0, 1), got {self.cg_tol!r}")
         if self.noise is not None and not (self.noise >= 0 and math.isfinite(self.noise)):
@@ -283,13 +299,38 @@ def _noise_weights(op, x, unit: float, m, options: HQSOptions):
     return weights, math.sqrt(sigma2)
 
 
+def _misfit_weights(op, smooth: FoldedXStep, x, aty, y, m, unit: float, options: HQSOptions,
+                    yy: float):
+    """Weights of the model's local misfit (module docstring), their reference σ (data units)
+    and the nearly unregularised fit (smoothness ``MISFIT_REG``) they come from; (None, None,
+    fit or None) where that fit is within ``misfit_weights`` times the noise (not made where
+    the smooth start ``x`` already is: it fits at least as closely). ``weights`` is
+    ``(My, Mx)``: one per sample position, for every view."""
+    if options.misfit_weights is None or options.noise_model is not None:
+        return None, None, None
+    mf = m.to(torch.float32)
+    yn = y / unit
+    noise = (estimate_noise(y, m) if options.noise is None else float(options.noise)) / unit
+    bound = options.misfit_weights * noise * math.sqrt(max(float(mf.sum()) * yn.shape[0], 1.0))
+    if not (noise > 0 and _residual_norm(op, x, smooth.data_product(x), aty, yn, mf, yy)
+            > bound):
+        return None, None, None
+    fit = smooth.at(MISFIT_REG * smooth.scale)(aty, None)
+    resid = op.forward(fit) - yn
+    if not float(torch.linalg.vector_norm(resid * mf)) > bound:
+        return None, None, fit
+    weights, sigma2 = misfit_weights(resid, m, noise)
+    return weights, math.sqrt(sigma2) * unit, fit
+
+
 def _weighted_normal(op, weights: torch.Tensor) -> Callable[[torch.Tensor], torch.Tensor]:
-    """v -> AᵀWA v, ``weights`` (V, My, Mx) zero where unobserved."""
+    """v -> AᵀWA v, ``weights`` (V, My, Mx) or (My, Mx), zero where unobserved."""
     return lambda v: op.adjoint(op.forward(v) * weights)
 
 
 def _data_weight(op: PhaseSpaceOperator, smooth: FoldedXStep, aty, y, m, unit: float,
-                 options: HQSOptions, weights=None, sigma=None, start=None, yy=None) -> float:
+                 options: HQSOptions, weights=None, sigma=None, start=None, yy=None,
+                 fit=None) -> float:
     """λ (module docstring): lam_scale / σ² · (d / 3)², σ = max(noise, model misfit); with
     ``weights``, the misfit is weighted and σ is the weights' reference σ.
 
@@ -297,7 +338,7 @@ def _data_weight(op: PhaseSpaceOperator, smooth: FoldedXStep, aty, y, m, unit: f
     weight fits the data at least as closely (the residual of a Tikhonov fit grows with its
     weight), so where the smooth ``start`` (weight ``init_reg``, its ``AᵀMA x`` carried by
     ``smooth``) already fits within the noise, that fit cannot raise σ and is not made.
-    ``yy``: ``‖y / unit‖²`` when known."""
+    ``yy``: ``‖y / unit‖²`` when known; ``fit``: that fit when made already."""
     if options.lam is not None:
         return float(options.lam)
     mf = m.to(torch.float32)
@@ -306,10 +347,11 @@ def _data_weight(op: PhaseSpaceOperator, smooth: FoldedXStep, aty, y, m, unit: f
         sigma = estimate_noise(y, m) if options.noise is None else float(options.noise)
     n_obs = max(float(mf.sum()) * yn.shape[0], 1.0)
     misfit = 0.0
-    if (weights is not None or start is None or _residual_norm(
+    if (fit is not None or weights is not None or start is None or _residual_norm(
             op, start, smooth.data_product(start), aty, yn, mf, yy) / math.sqrt(n_obs)
             > sigma / unit):
-        fit = smooth.at(MISFIT_REG * smooth.scale)(aty, None)
+        if fit is None:
+            fit = smooth.at(MISFIT_REG * smooth.scale)(aty, None)
         if weights is None:
             resid = _residual_norm(op, fit, smooth.data_product(fit), aty, yn, mf, yy)
         else:
@@ -363,7 +405,11 @@ def hqs(op: PhaseSpaceOperator, y, mask, options: HQSOptions = HQSOptions(), *,
     if options.noise_model is None and isinstance(data_normal, BandNormal):
         op.drop_spectra()  # from here on only the folded AᵀA and the bands' operators apply
     x = smooth.at(options.init_reg * smooth.scale)(aty, None)  # the smooth start
+    yy = float(torch.sum(yn.double() ** 2))
     weights, sigma = _noise_weights(op, x, unit, m, options)
+    fit = None
+    if weights is None and sigma is None:
+        weights, sigma, fit = _misfit_weights(op, smooth, x, aty, y, m, unit, options, yy)
     loop_aty = aty
     if weights is None:
         xstep = FoldedXStep(nm, data_normal, m, options.prior.transform, REG_FLOOR, options.cg,
@@ -373,8 +419,8 @@ def hqs(op: PhaseSpaceOperator, y, mask, options: HQSOptions = HQSOptions(), *,
         xstep = FoldedXStep(nm, _weighted_normal(op, weights), m, options.prior.transform,
                             REG_FLOOR, options.cg, exact=False, tol=options.cg_tol)
         loop_aty = op.adjoint(yn * weights)
-    yy = float(torch.sum(yn.double() ** 2))
-    lam = _data_weight(op, smooth, aty, y, m, unit, options, weights, sigma, start=x, yy=yy)
+    lam = _data_weight(op, smooth, aty, y, m, unit, options, weights, sigma, start=x, yy=yy,
+                       fit=fit)
     norm_y = max(float(torch.linalg.vector_norm(yn)), 1e-30)
     history: list[float] = []
 

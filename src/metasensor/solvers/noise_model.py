@@ -19,6 +19,14 @@ model's error, which the model above does not hold). With ``a = 0`` every weight
 and ``σ² = b``: the unweighted data term. Richardson–Lucy takes the model as the shifted-Poisson
 form of Snyder, Hammoud & White (JOSA A 10, 1014–1023, 1993): ``y + b/a`` is nearly Poisson
 (in units of ``a``) with mean ``A x + b/a``.
+
+Model error is not in that model: a bank that is an estimate, or a wavefront or scene that moves
+during the scan, leaves residuals where the scene has structure, and one global weight lets the
+fit explain them there with spurious detail. :func:`misfit_weights` weighs each sample position
+by its own misfit instead, ``var = max(σ², mean over the views of r²)`` of a first fit's
+residual ``r``: one step of iteratively reweighted least squares (Holland & Welsch,
+Commun. Stat. 6, 813–827, 1977) with the noise as the floor, so the samples the model explains
+keep the noise's weight.
 """
 
 from __future__ import annotations
@@ -28,7 +36,7 @@ from dataclasses import dataclass
 
 import torch
 
-__all__ = ["PoissonGaussian", "sample_weights", "VARIANCE_FLOOR"]
+__all__ = ["misfit_weights", "PoissonGaussian", "sample_weights", "VARIANCE_FLOOR"]
 
 #: smallest variance a weight uses, relative to the mean variance of the observed samples: the
 #: residual of dark samples is not their noise alone (the model's own error), so a weight is at
@@ -138,4 +146,37 @@ def sample_weights(model: PoissonGaussian, level: torch.Tensor, mask: torch.Tens
     inv = mf / var
     n_obs = max(float(mf.sum()) * var.shape[0], 1.0)
     sigma2 = n_obs / max(float(inv.sum()), 1e-30)
+    return (inv * sigma2).to(torch.float32), sigma2
+
+
+def misfit_weights(residual: torch.Tensor, mask: torch.Tensor, noise: float
+                   ) -> tuple[torch.Tensor, float]:
+    """Per-position weights of a data term from a fit's local misfit (module docstring).
+
+    Parameters
+    ----------
+    residual : torch.Tensor
+        ``(V, My, Mx)`` residual ``A x − y`` of a first fit (any units; zero or anything where
+        unobserved).
+    mask : torch.Tensor
+        ``(My, Mx)`` bool, True on observed samples.
+    noise : float
+        The samples' noise r.m.s. in the residual's units, > 0: the variance floor.
+
+    Returns
+    -------
+    weights : torch.Tensor
+        ``(My, Mx)`` float32, ``σ² / var`` with ``var = max(noise², mean_v residual²)`` at each
+        observed position (the same for every view): mean 1 over the observed positions, 0
+        where unobserved.
+    sigma2 : float
+        ``σ²``, the harmonic mean of the observed positions' variances (residual units²).
+    """
+    if not (noise > 0 and math.isfinite(noise)):
+        raise ValueError(f"noise must be positive and finite, got {noise!r}")
+    m = mask.to(torch.bool)
+    local = (residual.to(torch.float32) ** 2).mean(0)
+    var = torch.where(m, torch.clamp(local, min=noise**2), torch.ones_like(local))
+    inv = m.to(torch.float32) / var
+    sigma2 = float(m.sum()) / max(float(inv.sum()), 1e-30)
     return (inv * sigma2).to(torch.float32), sigma2
