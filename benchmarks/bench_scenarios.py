@@ -43,7 +43,8 @@ into fields of about 1,300 px, beyond this machine's time for the row).
 ``python benchmarks/bench_scenarios.py --plastic-wrap [--quick]`` runs it alone.
 
 ``python benchmarks/bench_scenarios.py --telescope [--quick] [--no-simulation]`` runs the four
-telescope rows alone (``--no-simulation``: not the simulation's), ``--gigapixel`` the gigapixel
+telescope rows alone (``--no-simulation``: not the simulation's; ``--telescope-demo``: the
+``telescope`` row alone), ``--gigapixel`` the gigapixel
 demo (cold and warm), ``stitch`` and ``stitch-cluster`` rows, ``--gigapixel-demo`` the two
 demo rows alone; each row goes into the results JSON in place of the old one (the other rows
 kept).
@@ -351,9 +352,10 @@ def run(quick: bool = False) -> list[dict]:
 
 
 if __name__ == "__main__":
-    if "--plastic-wrap" in sys.argv:  # the plastic-wrap row alone, merged into the JSON
-        quick = "--quick" in sys.argv
-        rows = _scenario_rows(quick, names=("plastic-wrap",))
+    if "--plastic-wrap" in sys.argv or "--telescope-demo" in sys.argv:  # one demo's row alone,
+        quick = "--quick" in sys.argv  # merged into the JSON
+        rows = _scenario_rows(quick, names=("plastic-wrap" if "--plastic-wrap" in sys.argv
+                                            else "telescope",))
         merge_rows(rows, quick)
         print(json.dumps(rows, indent=1))
     elif "--gigapixel-demo" in sys.argv:  # the gigapixel-cold and gigapixel rows alone
