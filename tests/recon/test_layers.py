@@ -48,6 +48,11 @@ def test_settings_are_validated():
         DepthLayers(median_samples=4)
     with pytest.raises(ValueError, match="min_separation"):
         DepthLayers(min_separation=0.0)
+    from metasensor.scenarios.plastic_wrap import PlasticWrapSettings
+
+    assert PlasticWrapSettings().depth_layers == "off"
+    with pytest.raises(ValueError, match="depth_layers"):
+        PlasticWrapSettings(depth_layers="on")
 
 
 def test_refuses_what_it_cannot_model():

@@ -12,7 +12,10 @@ and photon budget see it: the 2D sensor (focused on the chart), a plain light-fi
 (1 × 1 scan, ISA without aberration knowledge) and the meta-imaging sensor (5 × 5 scan, ISA
 with multisite wave DAO from scratch, no calibration: every block estimates its own wavefront,
 defocus included, so the near object's blocks come out in focus: all-in-focus by per-block
-defocus). Resolution is read two ways: the finest bar group resolved at every chart location
+defocus; ``PlasticWrapSettings(depth_layers="auto")`` adds the depth-aware block model,
+``reconstruct(depth_layers="auto")`` (:mod:`metasensor.recon.layers`), which gives each of the
+two depth layers of a block holding both the chart and the near object its own defocus).
+Resolution is read two ways: the finest bar group resolved at every chart location
 (:func:`~metasensor.scenarios.measure.bar_periods`, the bar chart only) and the local resolved
 frequency (:func:`~metasensor.scenarios.measure.resolved_frequency`) on a grid over the field;
 the near object's resolved frequency is compared with the chart's (the mean of the grid regions
@@ -43,13 +46,16 @@ class PlasticWrapSettings(ScenarioSettings):
     block and DAO's one aberration per block holds
     (:meth:`~metasensor.scenarios.screens.PlasticWrap.block_variation` measures it; the
     figures: docs/decisions.md, "DAO on the plastic wrap"); chart : "bars" or "chart"
-    (the scene behind the near object)."""
+    (the scene behind the near object); depth_layers : the meta-imaging reconstruction's
+    depth-aware block model (``reconstruct``'s option, "off" by default or "auto"; HQS only, so
+    "off" with ``iterations``; why off: docs/decisions.md, "the depth-aware block model")."""
 
     size: int = 240
     chart: str = "bars"
     blocks: tuple[int, int] = (4, 4)
     grid: tuple[int, int] = (4, 4)
     near_depth: float = 1.0e-3
+    depth_layers: str = "off"
     wrap: PlasticWrap = field(default_factory=lambda: PlasticWrap(rms_waves=3.0,
                                                                   correlation=0.25, spread=0.1))
 
@@ -60,6 +66,8 @@ class PlasticWrapSettings(ScenarioSettings):
             raise ValueError(f"blocks and grid must be positive, got {self.blocks}, {self.grid}")
         if self.chart not in ("bars", "chart"):
             raise ValueError(f"chart must be 'bars' or 'chart', got {self.chart!r}")
+        if self.depth_layers not in ("auto", "off"):
+            raise ValueError(f"depth_layers must be 'auto' or 'off', got {self.depth_layers!r}")
         if not np.isfinite(self.near_depth):
             raise ValueError(f"near_depth must be finite, got {self.near_depth!r}")
 
@@ -190,7 +198,8 @@ def run_plastic_wrap(out: str | Path, settings: PlasticWrapSettings | None = Non
         cpu.append(time.process_time())
         views = ms.realign(cap.frames, cap.config, cap.scan_order)
         rec = ms.reconstruct(views, cap.config, method="wave", blocks=s.blocks,
-                             iterations=s.iterations)
+                             iterations=s.iterations,
+                             depth_layers=s.depth_layers if s.iterations is None else "off")
         steps.update()
         cpu.append(time.process_time())
         rec_lf = ms.reconstruct(lf.views, lf.config, blocks=s.blocks, solver="rl")
@@ -232,10 +241,12 @@ def run_plastic_wrap(out: str | Path, settings: PlasticWrapSettings | None = Non
             "dao_error_waves_per_block": _dao_error(true_z, np.asarray(rec.zernike)),
             "estimated_defocus_waves_per_block": np.asarray(rec.zernike)[..., 3],
             "dao_fit_px_per_block": rec.dao_fit_px,
+            "depth_layers_per_block": rec.depth_layers,
             "stage_cpu_seconds": dict(zip(("simulation", "meta-imaging reconstruction",
                                            "light-field reconstruction"), np.diff(cpu).tolist(),
                                           strict=True)),
             "settings": {"size": s.size, "chart": s.chart, "blocks": s.blocks, "snr_db": s.snr_db,
-                         "near_depth_m": s.near_depth, "seed": s.seed},
+                         "near_depth_m": s.near_depth, "seed": s.seed,
+                         "depth_layers": s.depth_layers},
         }
         return run.finish(summary, figs, "metasensor scenario: plastic wrap (Fig. 3)")
