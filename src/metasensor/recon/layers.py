@@ -26,8 +26,8 @@ simulator renders depth the same way).
 3. :func:`favour_sharper`: the layer whose wavefront is smaller (r.m.s. over Noll 4-45) grows
    by ``grow_samples`` view samples into the other: near the layers' border the split is
    uncertain, and a point deconvolved with a PSF narrower than its own comes out blurred,
-   while one deconvolved with a wider PSF than its own rings (measured in
-   ``tests/recon/test_layers.py``: a chart edge given the defocused card's bank ruins both).
+   while one deconvolved with a wider PSF than its own rings (docs/decisions.md, "the
+   depth-aware block model").
 4. :func:`layer_weights`: each layer's indicator on the view grid, repeated onto the pixel grid,
    continued by its edge values over the operator's padded domain, feathered by a Gaussian and
    normalised to a partition of unity.
