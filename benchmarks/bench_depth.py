@@ -14,11 +14,12 @@ Hard scenes of plain light-field cameras (``metasensor.depth.scenes``: 9 x 9 vie
 (``smoothing=None``), scored as the 4D light-field benchmark does (BadPix 0.07 / 0.03 / 0.01,
 MSE x 100) over the view minus a 15-px border, with whether the span covers the truth and the
 scores on the pixels the estimator marks valid; each also without the learned choice of
-depth-edge pixels' layer (``refiner=None``, ``metasensor.depth.learned``) and without any
-re-decision of them (also ``edges=None``, ``metasensor.depth.edges``), and on photographs in
-front of a photograph (``scenes.natural_scene``, a family neither was tuned or trained on). The
-speed rows time the default (semi-global matching) and the window aggregation alone in the same
-run.
+depth-edge pixels' layer (``refiner=None``, ``metasensor.depth.learned``), without any
+re-decision of them (also ``edges=None``, ``metasensor.depth.edges``) and, for the default,
+without the removal of speckles (``speckles=None``, ``metasensor.depth.speckle``), and on
+photographs in front of a photograph (``scenes.natural_scene``, a family neither was tuned or
+trained on). The speed rows time the default (semi-global matching) and the window aggregation
+alone in the same run.
 ``quick``: 200 x 200 views and smaller scenes (< 1 min).
 """
 
@@ -144,10 +145,11 @@ HARD_CASES = ((9, 40.0), (5, 30.0))  # views per side, SNR [dB]
 
 
 def _hard_row(sv, n: int, smoothing, label: str, edges=ms.depth.EdgeSnap(),
-              refiner=ms.depth.EdgeRefiner()) -> dict:
+              refiner=ms.depth.EdgeRefiner(), speckles=ms.depth.Speckles()) -> dict:
     t0 = time.perf_counter()
     res = ms.estimate_depth(sv.views, sv.config, view_mask=np.ones((n, n), bool),
-                            smoothing=smoothing, edges=edges, refiner=refiner)
+                            smoothing=smoothing, edges=edges, refiner=refiner,
+                            speckles=speckles)
     dt = time.perf_counter() - t0
     m = np.zeros(sv.disparity.shape, bool)
     m[15:-15, 15:-15] = True
@@ -177,6 +179,8 @@ def _hard_rows(size: int) -> list[dict]:
             sv = benchmark_scene(kind, nnum=n, size=size, max_disparity=3.0, snr_db=snr, seed=1)
             name = f"hard {n}x{n} scan 1 ±3 {snr:g} dB: {kind} ({size} px)"
             rows.append(_hard_row(sv, n, ms.depth.SemiGlobal(), name))
+            rows.append(_hard_row(sv, n, ms.depth.SemiGlobal(), name + ", no speckle removal",
+                                  speckles=None))
             rows.append(_hard_row(sv, n, ms.depth.SemiGlobal(), name + ", no learned refiner",
                                   refiner=None))
             rows.append(_hard_row(sv, n, ms.depth.SemiGlobal(), name + ", no edge re-decision",

@@ -5,9 +5,10 @@ deterministic algorithms; the benchmark's evaluation scenes (seed 1 at 192 px) a
 photographs of ``scenes.natural_scene`` are never in the training set.
 
 Usage: ``python scripts/train_depth_refiner.py [--scenes N] [--steps N] [--width W] [--seed S]
-[--out PATH] [--samples FILE] [--validate N]`` (``--samples``: keep the rendered scenes'
-samples in FILE, ``.npz``, and reuse them when FILE exists; ``--validate``: score N held-out
-scenes of the training family, seeds disjoint from the training ones, after training).
+[--members M] [--out PATH] [--samples FILE] [--validate N]`` (``--members``: fits of the same
+samples with the seeds S, S + 1, ..., shipped as one ensemble; ``--samples``: keep the rendered
+scenes' samples in FILE, ``.npz``, and reuse them when FILE exists; ``--validate``: score N
+held-out scenes of the training family, seeds disjoint from the training ones, after training).
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ sys.path.insert(0, str(HERE.parent / "src"))
 import numpy as np  # noqa: E402
 import torch  # noqa: E402
 
-from metasensor.depth.learned import WEIGHTS, save_refiner  # noqa: E402
+from metasensor.depth.learned import WEIGHTS, EdgeEnsemble, save_refiner  # noqa: E402
 from metasensor.depth.refiner_training import (  # noqa: E402
     render_spec,
     samples,
@@ -58,6 +59,7 @@ def main(argv=None) -> int:
     parser.add_argument("--steps", type=int, default=8000)
     parser.add_argument("--width", type=int, default=32)
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--members", type=int, default=2)
     parser.add_argument("--out", default=str(DEFAULT_OUT))
     parser.add_argument("--samples", default=None)
     parser.add_argument("--validate", type=int, default=24,
@@ -75,7 +77,11 @@ def main(argv=None) -> int:
             np.savez(cache, features=feats, labels=labels, weights=weights)
     print(f"{len(labels)} samples, {labels.mean():.3f} front "
           f"({time.perf_counter() - t0:.0f} s)", flush=True)
-    model = train(feats, labels, weights, steps=args.steps, seed=args.seed, width=args.width)
+    if not 1 <= args.members <= 8:
+        parser.error(f"--members must be in [1, 8], got {args.members}")
+    fits = [train(feats, labels, weights, steps=args.steps, seed=args.seed + k, width=args.width)
+            for k in range(args.members)]
+    model = fits[0] if args.members == 1 else EdgeEnsemble(fits)
     print(f"trained in {time.perf_counter() - t0:.0f} s in all")
     save_refiner(model, Path(args.out))
     print(f"-> {args.out}")

@@ -88,7 +88,7 @@ def test_estimate_depth_applies_the_refiner_last(small_scene):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         res = ms.estimate_depth(sv.views, sv.config, view_mask=np.ones((5, 5), bool),
-                                refiner=EdgeRefiner())
+                                refiner=EdgeRefiner(), speckles=None)
     expected = refine_edges(*record, EdgeRefiner()).numpy()
     # equal up to the float rounding that the thread count changes (1e-7 with two threads)
     np.testing.assert_allclose(res.disparity, expected, rtol=0, atol=1e-5)

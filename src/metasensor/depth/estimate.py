@@ -20,7 +20,7 @@ Pipeline (the paper's Fig. 6 and Methods, "Depth estimation"):
    default, each depth-edge pixel given the layer that covers more than half its footprint, as
    the views measure it (``metasensor.depth.edges``), and, for plain light-field views (scan 1),
    a small learned choice of each edge pixel's layer between the two of its neighbourhood
-   (``metasensor.depth.learned``).
+   (``metasensor.depth.learned``) and the removal of speckles (``metasensor.depth.speckle``).
 5. Disparity → image-side depth ``z = δ · d · mla_focal``; with the main-lens focal length and
    focus distance (config or keywords), → object distance by the thin-lens equation
    (``metasensor.depth.geometry`` states the signs).
@@ -58,6 +58,7 @@ from metasensor.depth.refine import (
 )
 from metasensor.depth.sgm import SemiGlobal, normalise_costs, semi_global
 from metasensor.depth.span import measure_span, saturation
+from metasensor.depth.speckle import Speckles, remove_speckles
 
 __all__ = ["DepthResult", "estimate_depth"]
 
@@ -139,10 +140,11 @@ def _check_views(views, cfg: SystemConfig) -> np.ndarray:
 
 def _check_settings(cfg, arr, candidates, radius, refine_iterations, refine_radius, fill_radius,
                     eps, disparity_range, view_mask, smoothing=None, edges=None,
-                    refiner=None) -> np.ndarray:
+                    refiner=None, speckles=None) -> np.ndarray:
     """Validate the settings (one-line errors); returns the boolean view mask."""
     for name, value, kind in (("smoothing", smoothing, SemiGlobal), ("edges", edges, EdgeSnap),
-                              ("refiner", refiner, EdgeRefiner)):
+                              ("refiner", refiner, EdgeRefiner),
+                              ("speckles", speckles, Speckles)):
         if value is not None and not isinstance(value, kind):
             article = "an" if kind.__name__[0] in "AEIOU" else "a"
             raise TypeError(f"{name} must be {article} {kind.__name__} or None, got "
@@ -270,6 +272,7 @@ def estimate_depth(views, cfg: SystemConfig, calibration=None, *, candidates: in
                    smoothing: SemiGlobal | None = SemiGlobal(),
                    edges: EdgeSnap | None = EdgeSnap(),
                    refiner: EdgeRefiner | None = EdgeRefiner(),
+                   speckles: Speckles | None = Speckles(),
                    focal_length: float | None = None, focus_distance: float | None = None,
                    device=None, progress: bool = False) -> DepthResult:
     """Disparity, confidence and depth from views ``(nnum, nnum, H, W)`` (or a ``Capture``).
@@ -301,6 +304,9 @@ def estimate_depth(views, cfg: SystemConfig, calibration=None, *, candidates: in
     refiner : :class:`metasensor.depth.learned.EdgeRefiner` settings of the learned choice of
         each depth-edge pixel's layer (after ``edges``; default), or None: none. Applied to
         plain light-field views (``cfg.scan == 1``), the kind it was trained on, only.
+    speckles : :class:`metasensor.depth.speckle.Speckles` settings of the removal of small
+        isolated segments (last; default), or None: none. Plain light-field views only (where
+        it was measured).
     focal_length, focus_distance : main-lens geometry [m] overriding the config's.
     """
     if not isinstance(cfg, SystemConfig):
@@ -310,7 +316,7 @@ def estimate_depth(views, cfg: SystemConfig, calibration=None, *, candidates: in
         fill_radius = min(16, max(arr.shape[2:]))
     mask = _check_settings(cfg, arr, candidates, radius, refine_iterations, refine_radius,
                            fill_radius, eps, disparity_range, view_mask, smoothing, edges,
-                           refiner)
+                           refiner, speckles)
     n, c = cfg.nnum, cfg.center
     lens = geometry.main_lens_geometry(cfg, focal_length, focus_distance)
     shift_maps = resolve_shift_maps(calibration, n, arr.shape[2:])
@@ -352,6 +358,8 @@ def estimate_depth(views, cfg: SystemConfig, calibration=None, *, candidates: in
             disp = snap_edges(stack, au, av, disp, edges)
         if refiner is not None and cfg.scan == 1:
             disp = refine_edges(stack, au, av, disp, conf, refiner)
+        if speckles is not None and cfg.scan == 1:
+            disp = remove_speckles(disp, amax, speckles)
         valid = to_numpy((conf >= fill_threshold) & ~ends).astype(bool)
         disparity = to_numpy(disp).astype(np.float32)
         confidence = to_numpy(conf).astype(np.float32)

@@ -14,7 +14,9 @@ a depth. On long straight edges the pixels of one run take the mean of their run
 (:func:`metasensor.depth.edgeruns.pool_along_runs`, ``EdgeRefiner.run_length``).
 
 The weights ship as package data (``metasensor/depth/data/edge_refiner.npz``, float32 NumPy
-arrays, no pickle), trained by ``scripts/train_depth_refiner.py``
+arrays, no pickle): two fits of the network on the same samples with other seeds
+(:class:`EdgeEnsemble`, their probabilities averaged), trained by
+``scripts/train_depth_refiner.py``
 (:mod:`metasensor.depth.refiner_training`) on rendered scenes other than the benchmark's
 evaluation scenes.
 """
@@ -32,7 +34,8 @@ from metasensor.depth.edgefeatures import CHANNELS, PATCH, edge_samples
 from metasensor.depth.edgeruns import pool_along_runs
 from metasensor.depth.edges import two_layer_pixels
 
-__all__ = ["WEIGHTS", "EdgeNet", "EdgeRefiner", "load_refiner", "refine_edges", "save_refiner"]
+__all__ = ["WEIGHTS", "EdgeEnsemble", "EdgeNet", "EdgeRefiner", "load_refiner", "refine_edges",
+           "save_refiner"]
 
 WEIGHTS = "edge_refiner.npz"
 
@@ -108,20 +111,39 @@ class EdgeNet(nn.Module):
         return total / 8
 
 
-def save_refiner(model: EdgeNet, path: Path) -> None:
+class EdgeEnsemble(nn.Module):
+    """Several :class:`EdgeNet` fits of the same samples (other seeds): their probabilities
+    averaged, which removes part of the spread between equally good fits."""
+
+    def __init__(self, members: list[EdgeNet]):
+        super().__init__()
+        if not members:
+            raise ValueError("an ensemble needs at least one member")
+        self.members = nn.ModuleList(members)
+        self.features, self.hidden = members[0].features, members[0].hidden
+
+    def probability(self, x: torch.Tensor) -> torch.Tensor:
+        """The members' :meth:`EdgeNet.probability`, averaged."""
+        return sum(m.probability(x) for m in self.members) / len(self.members)
+
+
+def save_refiner(model: EdgeNet | EdgeEnsemble, path: Path) -> None:
     """Write ``model``'s parameters and buffers as float32 arrays (``.npz``, no pickle),
     atomically (:func:`metasensor.io.weights.save_state`)."""
     from metasensor.io.weights import save_state
 
-    save_state(model, path, features=model.features, hidden=model.hidden)
+    sizes = {"features": model.features, "hidden": model.hidden}
+    if isinstance(model, EdgeEnsemble):
+        sizes["members"] = len(model.members)
+    save_state(model, path, **sizes)
 
 
-_CACHE: dict[str, EdgeNet] = {}
+_CACHE: dict[str, EdgeNet | EdgeEnsemble] = {}
 
 
-def load_refiner(path: str | Path | None = None) -> EdgeNet:
-    """The network with the weights in ``path`` (default: the shipped :data:`WEIGHTS`), in eval
-    mode, float32, on the CPU."""
+def load_refiner(path: str | Path | None = None) -> EdgeNet | EdgeEnsemble:
+    """The network (or ensemble of networks) with the weights in ``path`` (default: the shipped
+    :data:`WEIGHTS`), in eval mode, float32, on the CPU."""
     from metasensor.io.weights import packaged_file, read_state
 
     if path is None:
@@ -130,7 +152,11 @@ def load_refiner(path: str | Path | None = None) -> EdgeNet:
     key = str(Path(path).resolve())
     if key not in _CACHE:
         sizes, state = read_state(path)
-        model = EdgeNet(sizes["features"], sizes["hidden"])
+        if "members" in sizes:
+            model = EdgeEnsemble([EdgeNet(sizes["features"], sizes["hidden"])
+                                  for _ in range(sizes["members"])])
+        else:
+            model = EdgeNet(sizes["features"], sizes["hidden"])
         model.load_state_dict(state)
         _CACHE[key] = model.eval().float()
     return _CACHE[key]
@@ -138,7 +164,7 @@ def load_refiner(path: str | Path | None = None) -> EdgeNet:
 
 def refine_edges(views: torch.Tensor, au, av, disparity: torch.Tensor,
                  confidence: torch.Tensor, options: EdgeRefiner = EdgeRefiner(),
-                 model: EdgeNet | None = None) -> torch.Tensor:
+                 model: EdgeNet | EdgeEnsemble | None = None) -> torch.Tensor:
     """Give each two-layer depth-edge pixel the layer the network prefers (module docstring).
 
     Parameters
@@ -148,7 +174,7 @@ def refine_edges(views: torch.Tensor, au, av, disparity: torch.Tensor,
     disparity : ``(H, W)`` disparity map [view px per view step] (not modified).
     confidence : ``(H, W)`` confidence of the estimator in [0, 1].
     options : :class:`EdgeRefiner`.
-    model : the network (default: :func:`load_refiner` of ``options.weights``).
+    model : the network or ensemble (default: :func:`load_refiner` of ``options.weights``).
 
     Returns
     -------

@@ -130,7 +130,8 @@ def render_spec(spec) -> SyntheticViews:
 
 
 def scene_record(sv: SyntheticViews):
-    """Run the estimator (default settings but the learned refiner, every view) on ``sv``:
+    """Run the estimator (default settings but the learned refiner and the speckle removal
+    after it, every view) on ``sv``:
     ``(views (N, H, W) as the estimator normalises them, au, av, disparity, confidence)`` as
     tensors / arrays, what the refiner sees."""
     import warnings
@@ -140,7 +141,8 @@ def scene_record(sv: SyntheticViews):
     n = sv.config.nnum
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        res = estimate_depth(sv.views, sv.config, view_mask=np.ones((n, n), bool), refiner=None)
+        res = estimate_depth(sv.views, sv.config, view_mask=np.ones((n, n), bool), refiner=None,
+                             speckles=None)
     uu, vv = np.divmod(np.arange(n * n), n)
     stack = _prepared_stack(sv.views, uu, vv, None, True, torch.device("cpu"))
     stack -= stack.mean()

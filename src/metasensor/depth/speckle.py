@@ -1,0 +1,83 @@
+"""Removing speckles from a disparity map: small isolated segments whose disparity no neighbour
+shares.
+
+A plane sweep leaves a few pixels, alone or in twos and threes, far from every neighbour
+(a wrong minimum where the views see a pixel half covered, or a background strip no view sees
+clear); semi-global matching's peak filter (Hirschmüller, PAMI 2008, sec. 3.4) removes such
+segments. Here: the map is split into segments of 4-connected pixels whose disparities differ
+by at most ``step`` between neighbours (OpenCV's ``filterSpeckles``), segments of at most
+``size`` pixels are speckles, and each speckle pixel takes the median of its non-speckle 3 x 3
+neighbours (repeated inwards for pixels with none). So a speckle takes a value the map holds
+next to it; a thin structure (a segment longer than ``size`` pixels) is kept.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+__all__ = ["Speckles", "remove_speckles"]
+
+_SCALE = 1000.0  # disparity -> int16 for OpenCV (±32 view px per view step at 1e-3 steps)
+
+
+@dataclass(frozen=True)
+class Speckles:
+    """Settings of :func:`remove_speckles`.
+
+    size : largest segment removed [px].
+    step : neighbours differing by at most this much belong to one segment [outermost-view
+        px: the disparity step times the largest view offset].
+    """
+
+    size: int = 4
+    step: float = 0.75
+
+    def __post_init__(self) -> None:
+        if not (isinstance(self.size, int) and 1 <= self.size <= 64):
+            raise ValueError(f"size must be an integer in [1, 64], got {self.size!r}")
+        if not (isinstance(self.step, int | float) and 0 < self.step < float("inf")):
+            raise ValueError(f"step must be a positive number, got {self.step!r}")
+
+
+def remove_speckles(disparity: torch.Tensor, amax: float,
+                    options: Speckles = Speckles()) -> torch.Tensor:
+    """The map with its speckles replaced by their neighbours' median (module docstring).
+
+    Parameters
+    ----------
+    disparity : ``(H, W)`` map [view px per view step] (not modified).
+    amax : the largest view offset used (``max |u − c|, |v − c|``), which converts
+        ``options.step`` to disparity.
+    options : :class:`Speckles`.
+
+    Returns
+    -------
+    torch.Tensor ``(H, W)``, the same dtype and device.
+    """
+    import cv2
+
+    d = disparity.detach().cpu().numpy().astype(np.float64)
+    limit = float(np.iinfo(np.int16).max - 1) / _SCALE
+    if not np.isfinite(d).all() or np.abs(d).max() > limit:
+        return disparity.clone()  # beyond int16 at this resolution: left as it is
+    img = np.round(d * _SCALE).astype(np.int16)
+    mark = np.iinfo(np.int16).min
+    diff = max(1, int(round(options.step / max(amax, 1e-12) * _SCALE)))
+    img, _ = cv2.filterSpeckles(img, mark, options.size, diff)
+    speck = torch.from_numpy(img == mark).to(disparity.device)
+    out = disparity.clone()
+    valid = ~speck
+    for _ in range(options.size + 1):
+        if bool(valid.all()):
+            break
+        nan = torch.full_like(out, float("nan"))
+        pad = F.pad(torch.where(valid, out, nan)[None, None], (1, 1, 1, 1), mode="replicate")
+        med = torch.nanmedian(F.unfold(pad, 3)[0], 0).values.reshape(out.shape)
+        fill = ~valid & torch.isfinite(med)
+        out = torch.where(fill, med, out)
+        valid |= fill
+    return out
