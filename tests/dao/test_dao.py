@@ -362,26 +362,36 @@ def test_block_takes_a_psf_taller_than_wide(rng):
     assert est.shape == (12, 48) and bool(torch.isfinite(est).all())
 
 
-def test_a_diverging_update_is_refused_with_one_warning(monkeypatch):
-    # an update whose wavefront sends rays beyond max_reach_px even for a quarter of it (80
-    # waves of Noll 45: 914 px, a quarter 228 px against 200) is not applied: DAO stops, keeps
-    # the estimate before it and says so once (a plastic-wrap run grew 725-px PSF windows and
-    # 9 GB banks otherwise)
+def _forced_noll45(monkeypatch, waves: float, keep_fit: bool):
+    """A 9 x 9 system's views, and DAO's shift fit forced to ``waves`` of Noll 45 (the rest of
+    the fit kept or zeroed): the way to make an update whose rays reach far."""
     import metasensor.dao.estimate as est
-    from metasensor.dao.banks import ray_reach_px
 
     cfg = SystemConfig(nnum=9, mla_pitch=41.4e-6, mla_focal=414e-6, scan=3)
     bank = ms.view_psfs(cfg)
     views, _ = synth_views(cfg, _scene(96 + bank.shape[-1]), bank, snr_db=40)
     real = est.fit_shifts
 
-    def wild(*args, **kwargs):
+    def forced(*args, **kwargs):
         fit = real(*args, **kwargs)
-        fit.zernike[44] = 80.0
+        if not keep_fit:
+            fit.zernike[:] = 0.0
+        fit.zernike[44] = waves
         return fit
 
-    monkeypatch.setattr(est, "fit_shifts", wild)
-    assert ray_reach_px(cfg, np.eye(45)[44] * 20.0, cfg.view_mask()) > 200
+    monkeypatch.setattr(est, "fit_shifts", forced)
+    return cfg, views
+
+
+def test_a_diverging_update_is_refused_with_one_warning(monkeypatch):
+    # an update whose wavefront sends rays beyond max_reach_px even for a quarter of it (80
+    # waves of Noll 45: 914 px, a quarter 228 px against 200) is not applied: DAO stops, keeps
+    # the estimate before it and says so once (a plastic-wrap run grew 725-px PSF windows and
+    # 9 GB banks otherwise)
+    from metasensor.dao.banks import ray_reach_px
+
+    cfg, views = _forced_noll45(monkeypatch, 80.0, keep_fit=True)
+    assert ray_reach_px(cfg, np.eye(45)[44] * 80.0 / 4, cfg.view_mask()) > 200
     with pytest.warns(RuntimeWarning, match="DAO stopped after 0 update") as rec:
         res = run_dao(views, cfg, method="wave", max_iter=3, init=np.eye(45)[3] * 0.05)
     assert len(rec) == 1
@@ -391,21 +401,9 @@ def test_a_diverging_update_is_refused_with_one_warning(monkeypatch):
 def test_an_overshooting_update_is_shortened_to_the_reach(monkeypatch):
     # an update whose whole step sends the rays beyond max_reach_px but a part of it does not
     # (20 waves of Noll 45: 229 px against 100) is applied as the largest fraction within it
-    import metasensor.dao.estimate as est
     from metasensor.dao.banks import ray_reach_px
 
-    cfg = SystemConfig(nnum=9, mla_pitch=41.4e-6, mla_focal=414e-6, scan=3)
-    bank = ms.view_psfs(cfg)
-    views, _ = synth_views(cfg, _scene(96 + bank.shape[-1]), bank, snr_db=40)
-    real = est.fit_shifts
-
-    def far(*args, **kwargs):
-        fit = real(*args, **kwargs)
-        fit.zernike[:] = 0.0
-        fit.zernike[44] = 20.0
-        return fit
-
-    monkeypatch.setattr(est, "fit_shifts", far)
+    cfg, views = _forced_noll45(monkeypatch, 20.0, keep_fit=False)
     res = run_dao(views, cfg, method="wave", max_iter=1, max_reach_px=100.0)
     assert len(res.steps) == 1 and 0.4 < res.steps[0] < 0.45  # 100 / 229 = 0.437
     reach = ray_reach_px(cfg, res.zernike, cfg.view_mask())
