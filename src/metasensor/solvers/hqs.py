@@ -50,6 +50,7 @@ from metasensor.phasespace.masked_normal import BandNormal
 from metasensor.phasespace.normal import FoldedNormal
 from metasensor.phasespace.operator import PhaseSpaceOperator
 from metasensor.solvers.noise_model import PoissonGaussian, misfit_weights, sample_weights
+from metasensor.solvers.pcg import preconditioned_cg
 from metasensor.solvers.priors import GRADIENT, HyperLaplacian, Prior, Transform
 from metasensor.solvers.result import SolveResult
 from metasensor.solvers.splitting import Continuation, half_quadratic_splitting
@@ -183,41 +184,6 @@ def estimate_noise(data: torch.Tensor, mask: torch.Tensor) -> float:
     return float(sum(out) / len(out)) if out else 0.0
 
 
-def _pcg(data_normal, reg, mu: float, rhs, x, ax, inv, nm: FoldedNormal, iterations: int,
-         tol: float = 0.0) -> tuple[torch.Tensor, torch.Tensor]:
-    """Conjugate gradients on ``(AᵀMA + μ R) x = rhs`` from ``x``, preconditioned by the
-    circular, fully observed system (``nm.solve`` with ``inv``); ``R`` = ``reg``. At most
-    ``iterations``; fewer once ``‖r‖ <= tol·‖rhs‖`` after an iteration (r the residual).
-
-    ``ax`` is ``AᵀMA x`` when known (None: computed here); it is carried along the iterations
-    (``AᵀMA`` of each step is one product the iteration makes anyway), so the result comes with
-    its own ``AᵀMA x`` and the next call starts without a product."""
-    if ax is None:
-        ax = data_normal(x)
-    r = rhs - ax - mu * reg(x)
-    z = nm.solve(r, inv)
-    p = z
-    rz = float(torch.vdot(r.flatten(), z.flatten()))
-    stop = tol * float(torch.linalg.vector_norm(rhs))
-    for _ in range(iterations):
-        qd = data_normal(p)
-        q = qd + mu * reg(p)
-        pq = float(torch.vdot(p.flatten(), q.flatten()))
-        if not pq > 0:
-            break
-        a = rz / pq
-        x = x + a * p
-        ax = ax + a * qd
-        r = r - a * q
-        if stop > 0 and float(torch.linalg.vector_norm(r)) <= stop:
-            break
-        z = nm.solve(r, inv)
-        rz_new = float(torch.vdot(r.flatten(), z.flatten()))
-        p = z + (rz_new / rz) * p if rz > 0 else z
-        rz = rz_new
-    return x, ax
-
-
 class FoldedXStep:
     """The x-step ``(AᵀMA + μ (LᵀL + ε I)) x = rhs`` of the phase-space operator.
 
@@ -266,8 +232,8 @@ class FoldedXStep:
                 return self.nm.solve(rhs, inv)
             ax = None if x is None else self.data_product(x)
             x0 = self.nm.solve(rhs, inv) if x is None else x
-            out, ax = _pcg(self.data_normal, self.reg, mu, rhs, x0, ax, inv, self.nm, self.cg,
-                           self.tol)
+            out, ax = preconditioned_cg(self.data_normal, self.reg, mu, rhs, x0, ax, inv,
+                                        self.nm, self.cg, self.tol)
             self._last = (out, ax)
             return out
 
