@@ -123,18 +123,6 @@ class LayerMap:
     fraction: np.ndarray
 
 
-def _otsu(values: np.ndarray) -> float:
-    """Otsu's threshold of 1-D values: the split maximising the between-class variance."""
-    x = np.sort(values.astype(np.float64))
-    n = x.size
-    i = np.arange(1, n)
-    c = np.cumsum(x)
-    m1 = c[:-1] / i
-    m2 = (c[-1] - c[:-1]) / (n - i)
-    k = int(np.argmax(i * (n - i) * (m1 - m2) ** 2))
-    return float(0.5 * (x[k] + x[k + 1]))
-
-
 def _residual_disparity(window: np.ndarray, cfg: SystemConfig, zernike, device):
     """``estimate_depth`` of the window with the wavefront's per-view shifts removed."""
     from metasensor.dao.estimate import JMAX, gradient_shifts
@@ -173,6 +161,7 @@ def find_layers(window: np.ndarray, cfg: SystemConfig, zernike, region: tuple[sl
         None where the region's disparities do not split into two layers (module docstring).
     """
     from scipy.ndimage import median_filter
+    from skimage.filters import threshold_otsu
 
     res = _residual_disparity(window, cfg, zernike, device)
     disp = median_filter(np.asarray(res.disparity, np.float64), settings.median_samples,
@@ -188,7 +177,7 @@ def find_layers(window: np.ndarray, cfg: SystemConfig, zernike, region: tuple[sl
     values = disp[use]
     if values.size < 16 or np.ptp(values) < settings.min_separation:
         return None
-    thr = _otsu(values)
+    thr = float(threshold_otsu(values))
     low, high = values[values <= thr], values[values > thr]
     fraction = np.array([low.size, high.size], np.float64) / values.size
     medians = np.array([np.median(low), np.median(high)])

@@ -267,24 +267,26 @@ def _noise_weights(op, x, unit: float, m, options: HQSOptions):
 
 def _misfit_weights(op, smooth: FoldedXStep, x, aty, y, m, unit: float, options: HQSOptions,
                     yy: float):
-    """Weights of the model's local misfit (module docstring), their reference σ (data units)
-    and the nearly unregularised fit (smoothness ``MISFIT_REG``) they come from; (None, None,
-    fit or None) where that fit is within ``misfit_weights`` times the noise (not made where
-    the smooth start ``x`` already is: it fits at least as closely). ``weights`` is
-    ``(My, Mx)``: one per sample position, for every view."""
+    """Weights of the model's local misfit (module docstring) and their reference σ (data
+    units), or (None, the noise σ (data units)) where the nearly unregularised fit (smoothness
+    ``MISFIT_REG``) is within ``misfit_weights`` times the noise (that fit is not made where the
+    smooth start ``x`` already is: it fits at least as closely); third, that fit where made.
+    ``weights`` is ``(My, Mx)``: one per sample position, for every view. (None, None, None)
+    where the weights are off (``misfit_weights`` None or a ``noise_model`` given)."""
     if options.misfit_weights is None or options.noise_model is not None:
         return None, None, None
     mf = m.to(torch.float32)
     yn = y / unit
-    noise = (estimate_noise(y, m) if options.noise is None else float(options.noise)) / unit
+    sigma = estimate_noise(y, m) if options.noise is None else float(options.noise)
+    noise = sigma / unit
     bound = options.misfit_weights * noise * math.sqrt(max(float(mf.sum()) * yn.shape[0], 1.0))
     if not (noise > 0 and _residual_norm(op, x, smooth.data_product(x), aty, yn, mf, yy)
             > bound):
-        return None, None, None
+        return None, sigma, None
     fit = smooth.at(MISFIT_REG * smooth.scale)(aty, None)
     resid = op.forward(fit) - yn
     if not float(torch.linalg.vector_norm(resid * mf)) > bound:
-        return None, None, fit
+        return None, sigma, fit
     weights, sigma2 = misfit_weights(resid, m, noise)
     return weights, math.sqrt(sigma2) * unit, fit
 
