@@ -9,27 +9,38 @@ side, and by at most :data:`MAX_SPAN` view px per view step), with candidates ha
 pixel apart at the outermost view; the span is what the confident coarse estimates cover
 (0.2-99.8 percentiles) plus a margin of two coarse candidate steps and 5 % of that width.
 After the fine sweep, :func:`saturation` says how much of the estimate still falls at an end
-of the span (then the span is widened, or, when it was given, a warning says so).
+of the span (then the span is widened, :func:`widened`, or, when it was given, a warning says
+so, :func:`check_given_span`). :func:`initial_span` and :func:`sweep_candidates` give
+:func:`metasensor.depth.estimate_depth` its first span and the candidates of each fine sweep.
 
 Hand-written (no library finds the disparity span of a light field).
 """
 
 from __future__ import annotations
 
+import math
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
 import torch
 
+from metasensor.depth import geometry
 from metasensor.depth.cost import CostVolume
 from metasensor.depth.refine import peak_ratio_confidence, subpixel_minimum
 from metasensor.depth.sgm import normalise_costs, semi_global
 
-__all__ = ["MAX_SPAN", "SpanEstimate", "measure_span", "saturation"]
+__all__ = ["MAX_SPAN", "SpanEstimate", "check_given_span", "initial_span", "measure_span",
+           "saturation", "sweep_candidates", "widened"]
 
 MAX_SPAN = 16.0  # view px per view step: the widest coarse search
 COARSE_SIDE = 96  # coarse views at least this many px on their short side (thin structures)
 CONFIDENT = 0.05  # peak-ratio confidence above which a coarse estimate counts
+MAX_CANDIDATES = 1024  # plane-sweep disparities, at most
+MIN_CANDIDATES = 64  # the automatic candidate count, at least
+OUTER_STEP = 0.5  # automatic candidate spacing: the outermost view moves this many view px
+COARSE_SATURATED = 0.01  # share of saturated coarse estimates above which a warning says so
+SATURATED = 0.001  # share of confident pixels on an end of the span that widens or warns
 
 
 @dataclass(frozen=True)
@@ -125,3 +136,126 @@ def saturation(cost: torch.Tensor, idx: torch.Tensor, steps: int = 3,
     high = (idx == k - 1) & (cost[k - 1] < (1 - drop) * cost[k - 1 - j])
     n = float(idx.numel())
     return float(low.sum()) / n, float(high.sum()) / n
+
+
+def sweep_candidates(span, candidates: int | None, amax: float) -> np.ndarray:
+    """The plane-sweep disparities over ``span``.
+
+    Parameters
+    ----------
+    span : (float, float)
+        (low, high) view px per view step.
+    candidates : int or None
+        Their number; None: the outermost view moves ``OUTER_STEP`` view px per candidate
+        (between ``MIN_CANDIDATES`` and ``MAX_CANDIDATES``).
+    amax : float
+        The largest view offset from the centre [view steps].
+
+    Returns
+    -------
+    numpy.ndarray
+        The candidates (:func:`metasensor.depth.geometry.disparity_candidates`).
+    """
+    if candidates is None:  # the outermost view moves OUTER_STEP view px per candidate
+        width = float(span[1] - span[0])
+        candidates = int(min(MAX_CANDIDATES, max(MIN_CANDIDATES,
+                                                 math.ceil(width * amax / OUTER_STEP) + 1)))
+    return geometry.disparity_candidates(span, candidates)
+
+
+def widened(span, limit, low: float, high: float) -> tuple[float, float]:
+    """The span grown by half its width on each saturated side, within ``limit``.
+
+    Parameters
+    ----------
+    span, limit : (float, float)
+        The swept span and the widest searched one, view px per view step.
+    low, high : float
+        Shares of the pixels saturating the low / high end (:func:`saturation`); a side grows
+        where its share exceeds ``SATURATED``.
+
+    Returns
+    -------
+    (float, float)
+        The new span (equal to ``span`` where nothing grows).
+    """
+    lo, hi = span
+    half = 0.5 * (hi - lo)
+    if low > SATURATED:
+        lo = max(lo - half, limit[0])
+    if high > SATURATED:
+        hi = min(hi + half, limit[1])
+    return (lo, hi)
+
+
+def initial_span(stack, au, av, centre, cfg, occlusion, disparity_range):
+    """The span the first fine sweep of :func:`metasensor.depth.estimate_depth` covers.
+
+    Parameters
+    ----------
+    stack : torch.Tensor
+        The used views ``(V, H, W)``.
+    au, av : numpy.ndarray
+        Their offsets from the centre view [view steps].
+    centre : int
+        The centre view's index in ``stack``.
+    cfg : SystemConfig
+        The system (its default disparity range is the least the coarse search covers).
+    occlusion : bool
+        Half-pupil occlusion handling in the coarse search.
+    disparity_range : (float, float) or None
+        A given span [view px per view step], or None: measured (:func:`measure_span`).
+
+    Returns
+    -------
+    span : (float, float)
+        The span to sweep.
+    limit : (float, float) or None
+        The widest searched span (the bound of :func:`widened`), None for a given span.
+    found : SpanEstimate
+        The coarse search's result.
+
+    Warns once (``RuntimeWarning``, at the caller of ``estimate_depth``) when more than
+    ``COARSE_SATURATED`` of the coarse estimates saturate the widest search.
+    """
+    given = None if disparity_range is None else (float(disparity_range[0]),
+                                                  float(disparity_range[1]))
+    found = measure_span(stack, au, av, centre, geometry.default_disparity_range(cfg),
+                         occlusion=occlusion, given=given)
+    if given is not None:
+        return given, None, found
+    limit = found.searched
+    if found.saturated > COARSE_SATURATED:
+        warnings.warn(f"{100 * found.saturated:.1f} % of the coarse estimates saturate an end "
+                      f"of the widest search {limit[0]:+.2f} .. {limit[1]:+.2f} view px per "
+                      "view step: larger disparities are not found", RuntimeWarning,
+                      stacklevel=3)
+    return found.span, limit, found
+
+
+def check_given_span(span, sat, beyond) -> tuple[float, float]:
+    """The saturated shares below / above a given span.
+
+    Parameters
+    ----------
+    span : (float, float)
+        The given span [view px per view step].
+    sat : (float, float)
+        The final sweep's saturated shares (:func:`saturation`).
+    beyond : (float, float)
+        The coarse wide search's shares of confident estimates below / above ``span``
+        (:attr:`SpanEstimate.beyond`).
+
+    Returns
+    -------
+    (float, float)
+        The larger of the two, per side. Warns once (``RuntimeWarning``, at the caller of
+        ``estimate_depth``) when either exceeds ``SATURATED``.
+    """
+    sat = tuple(max(a, b) for a, b in zip(sat, beyond, strict=True))
+    if max(sat) > SATURATED:
+        warnings.warn(f"{100 * sat[0]:.1f} % / {100 * sat[1]:.1f} % of the scene lies "
+                      f"below / above disparity_range {span} (coarse wide search): "
+                      "widen it (or leave it to the default, measured)",
+                      RuntimeWarning, stacklevel=3)
+    return sat
