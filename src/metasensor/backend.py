@@ -3,13 +3,14 @@
 from __future__ import annotations
 
 import contextlib
+import functools
 import warnings
 
 import numpy as np
 import torch
 
 __all__ = ["resolve_device", "address_space_limit", "as_tensor", "to_numpy", "check_memory",
-           "reproducible"]
+           "reproducible", "one_thread_here"]
 
 
 def address_space_limit() -> int | None:
@@ -110,3 +111,36 @@ def reproducible(seed: int):
         torch.set_num_threads(threads)
         torch.use_deterministic_algorithms(deterministic)
 
+
+@functools.cache
+def _openmp_runtimes():
+    """The OpenMP runtimes loaded in this process (torch's among them), found once."""
+    from threadpoolctl import ThreadpoolController
+
+    return ThreadpoolController().select(user_api="openmp")
+
+
+@contextlib.contextmanager
+def one_thread_here(device: torch.device | str | None = "cpu"):
+    """Run the block's CPU torch operations on one intra-op thread, in the calling thread only.
+
+    ``torch.set_num_threads`` is process-wide: a thread whose first parallel operation falls in
+    the window keeps one thread for good, and other callers see the setting change. This
+    limits instead the calling thread's own OpenMP thread count (OpenMP's ``nthreads-var`` is
+    per thread; ``threadpoolctl`` sets it in every loaded OpenMP runtime), which is the count
+    torch's intra-op ``parallel_for`` reads; other threads, threads started meanwhile and
+    ``torch.get_num_threads()`` outside the block keep theirs. Restored on exit (also on an
+    exception). Where torch runs without OpenMP the block runs as it is.
+
+    Parameters
+    ----------
+    device : torch.device or str or None
+        The device the block computes on (None: the CPU); anything but the CPU leaves the
+        threads alone.
+    """
+    if device is not None and torch.device(device).type != "cpu":
+        yield
+        return
+    torch.get_num_threads()  # this thread's first call sets its count from torch's setting
+    with _openmp_runtimes().limit(limits=1):
+        yield

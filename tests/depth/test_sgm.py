@@ -56,6 +56,21 @@ def test_semi_global_matches_the_recursion_and_its_row_blocks(paths):
     assert torch.get_num_threads() == 1  # restored (the depth conftest sets one thread)
 
 
+def test_semi_global_leaves_torchs_thread_setting_alone(monkeypatch):
+    """One thread for the scan lines, in this thread only: ``torch.set_num_threads`` is
+    process-wide, so semi-global matching must not call it."""
+    cost = torch.from_numpy(np.random.default_rng(1).random((6, 9, 8)).astype(np.float32))
+    expected = semi_global(cost, SemiGlobal(0.2, 0.7, 8), rows=4)
+
+    def refuse(n):
+        raise AssertionError(f"torch.set_num_threads({n}) changes every thread's setting")
+
+    with monkeypatch.context() as m:
+        m.setattr(torch, "set_num_threads", refuse)
+        got = semi_global(cost, SemiGlobal(0.2, 0.7, 8), rows=4)
+    torch.testing.assert_close(got, expected, rtol=0, atol=0)
+
+
 def test_semi_global_fills_an_untextured_gap_and_keeps_a_one_pixel_bar():
     k, h, w = 9, 12, 20
     cost = np.ones((k, h, w), np.float32)

@@ -27,6 +27,8 @@ from dataclasses import dataclass
 
 import torch
 
+from metasensor.backend import one_thread_here
+
 __all__ = ["SemiGlobal", "normalise_costs", "semi_global"]
 
 
@@ -122,13 +124,9 @@ def semi_global(cost: torch.Tensor, penalties: SemiGlobal = SemiGlobal(),
         raise ValueError(f"cost must be (K, H, W), got shape {tuple(cost.shape)}")
     p1, p2 = float(penalties.p1), float(penalties.p2)
     total = torch.zeros_like(cost)
-    threads = torch.get_num_threads()
-    if cost.device.type == "cpu":  # thousands of small steps: threads only add overhead
-        torch.set_num_threads(1)
-    try:
+    # thousands of small steps: threads only add overhead (this thread only; no global change)
+    with one_thread_here(cost.device):
         _all_lines(cost, total, p1, p2, rows, penalties.paths)
-    finally:
-        torch.set_num_threads(threads)
     return total
 
 
