@@ -29,8 +29,9 @@ import math
 
 import torch
 
+from metasensor.phasespace.geometry import Geometry, smooth_size
 from metasensor.phasespace.normal import FoldedNormal
-from metasensor.phasespace.operator import Geometry, PhaseSpaceOperator, smooth_size
+from metasensor.phasespace.operator import PhaseSpaceOperator
 
 __all__ = ["BandNormal", "masked_normal", "MAX_BAND_FRACTION"]
 

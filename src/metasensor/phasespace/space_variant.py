@@ -34,7 +34,8 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from metasensor.phasespace.operator import Geometry, GridShapes, PhaseSpaceOperator
+from metasensor.phasespace.geometry import Geometry, GridShapes
+from metasensor.phasespace.operator import PhaseSpaceOperator
 
 __all__ = ["SpaceVariantOperator", "corner_weights", "pad_banks"]
 
