@@ -1,7 +1,8 @@
 """Slanted-edge MTF (ISO 12233 method), hand-written.
 
 No maintained Python library implements the ISO 12233 slanted-edge analysis, so this module
-writes it out (after Burns' ``sfrmat3``/``sfrmat4``):
+writes it out (after Burns' ``sfrmat3``/``sfrmat4``; steps 4 and 5 and the tail smoothing in
+:mod:`metasensor.metrics.edge_spectrum`):
 
 1. Orientation: the edge is near-vertical if the mean horizontal gradient dominates, else the ROI
    is transposed and treated the same way (either polarity is accepted).
@@ -38,12 +39,17 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+# the spectrum's constants stay importable from here
+from metasensor.metrics.edge_spectrum import (  # noqa: F401
+    MAX_REACH,
+    TAIL_CORE,
+    TAIL_TAPER,
+    WINDOWS,
+    edge_spectrum,
+)
+
 __all__ = ["EdgeMTF", "slanted_edge_mtf", "measure_edge", "mtf50", "mtf_at", "check_roi"]
 
-_WINDOWS = ("hamming", "tukey", "none")
-TAIL_CORE = 2.5  # LSF core kept unsmoothed: this many 10-90 % edge widths each side
-MAX_REACH = 48.0  # pixels of the LSF kept each side of the edge (at least 10 edge widths)
-TAIL_TAPER = 0.5  # blend from core to smoothed tails over this fraction of the core
 
 
 @dataclass(frozen=True)
@@ -137,19 +143,6 @@ def check_roi(roi, shape: tuple[int, int]) -> tuple[int, int, int, int]:
     return (y0, y1, x0, x1)
 
 
-def _window(n: int, centre: float, half: float, kind: str) -> np.ndarray:
-    x = np.arange(n) - centre
-    t = np.clip(np.abs(x) / half, 0.0, 1.0)
-    if kind == "hamming":
-        w = 0.54 + 0.46 * np.cos(np.pi * t)
-        w[np.abs(x) > half] = 0.0
-        return w
-    if kind == "tukey":  # flat over the inner half, cosine taper over the outer half
-        w = np.where(t < 0.5, 1.0, 0.5 * (1 + np.cos(np.pi * (2 * t - 1))))
-        return w
-    return np.ones(n)
-
-
 def _centroids(deriv: np.ndarray, centres: np.ndarray, half: float) -> np.ndarray:
     """Centroid (x position) of each row's derivative under a Hamming window around centres."""
     n = deriv.shape[1]
@@ -178,46 +171,6 @@ def _fit_edge(a: np.ndarray) -> tuple[float, float]:
         else:  # narrower window on later passes: less noise in the centroids
             half = max(nx / 3.0, 4.0)
     return float(c0), float(c1)
-
-
-def _lsf_centre_width(esf: np.ndarray, oversample: int) -> tuple[float, float]:
-    """Edge centre (LSF bin index) and 10-90 % rise width (bins) of a rising ESF.
-
-    The ESF is smoothed over one pixel first so that noise does not move the crossings.
-    """
-    from scipy.ndimage import uniform_filter1d
-
-    e = uniform_filter1d(esf, oversample, mode="nearest")
-    q = max(2, e.size // 10)
-    lo, hi = np.median(e[:q]), np.median(e[-q:])
-    t = (e - lo) / (hi - lo)
-
-    def crossing(level: float) -> float:
-        i = int(np.argmax(t >= level))
-        if i == 0:
-            return 0.0
-        return i - 1 + (level - t[i - 1]) / max(t[i] - t[i - 1], 1e-12)
-
-    c10, c50, c90 = crossing(0.1), crossing(0.5), crossing(0.9)
-    return c50 - 0.5, max(c90 - c10, 1.0)  # the LSF bin i sits between ESF bins i and i + 1
-
-
-def _smooth_tails(lsf: np.ndarray, mid: float, core: float, oversample: int) -> np.ndarray:
-    """Keep the LSF core (|x - mid| < core bins) as is; low-pass the tails beyond it.
-
-    Hand-written noise reduction (not in ISO 12233): far from the edge the true LSF is small and
-    slowly varying, while pixel noise there is white and, after the derivative, dominates the
-    high frequencies. Smoothing the tails with a Gaussian of one pixel (sigma) removes that noise
-    but keeps their area, so the low-frequency MTF (and MTF[0] = 1) is not biased as it is by
-    truncating the LSF. The blend uses a raised-cosine taper over another ``core`` bins.
-    """
-    from scipy.ndimage import gaussian_filter1d
-
-    x = np.abs(np.arange(lsf.size) - mid)
-    t = np.clip((x - core) / (TAIL_TAPER * core), 0.0, 1.0)
-    keep = 0.5 * (1 + np.cos(np.pi * t))
-    tail = gaussian_filter1d(lsf * (1 - keep), float(oversample), mode="constant")
-    return lsf * keep + tail
 
 
 def _check_straight_edge(a: np.ndarray, c0: float, c1: float, roi) -> None:
@@ -274,8 +227,8 @@ def measure_edge(image, roi=None, *, oversample: int = 4, window: str = "hamming
     c0, c1 = _fit_edge(a)
     _check_straight_edge(a, c0, c1, roi)
     esf, angle = _binned_esf(a, c0, c1, oversample, roi)
-    lsf_w, freq, mtf = _edge_spectrum(esf, oversample, window, tail_smoothing, correct_binning,
-                                      roi)
+    lsf_w, freq, mtf = edge_spectrum(esf, oversample, window, tail_smoothing, correct_binning,
+                                     roi)
     keep = freq <= fmax + 1e-12
     return EdgeMTF(freq=freq[keep], mtf=mtf[keep], orientation="vertical" if vertical else
                    "horizontal", angle_deg=angle, roi=roi, oversample=int(oversample),
@@ -289,8 +242,8 @@ def _edge_roi(image, roi, oversample, window, pixel_pitch, fmax):
         raise ValueError(f"image must be 2-D (H, W), got shape {arr.shape}")
     if not np.issubdtype(arr.dtype, np.number) or np.iscomplexobj(arr):
         raise TypeError(f"image must be a real numeric array, got dtype {arr.dtype}")
-    if window not in _WINDOWS:
-        raise ValueError(f"window must be one of {_WINDOWS}, got {window!r}")
+    if window not in WINDOWS:
+        raise ValueError(f"window must be one of {WINDOWS}, got {window!r}")
     if int(oversample) != oversample or oversample < 1:
         raise ValueError(f"oversample must be a positive integer, got {oversample!r}")
     if pixel_pitch is not None and not (np.isfinite(pixel_pitch) and pixel_pitch > 0):
@@ -355,35 +308,6 @@ def _binned_esf(a, c0, c1, oversample, roi):
     esf = np.interp(centres, mean_pos, sums[filled] / counts[filled])
 
     return esf, angle
-
-
-def _edge_spectrum(esf, oversample, window, tail_smoothing, correct_binning, roi):
-    """(windowed line-spread function, frequencies in cycles/px, MTF) of a binned ESF: the
-    derivative and the bin average divided out, the noise-only tails cut and smoothed."""
-    delta = 1.0 / oversample
-    lsf = np.diff(esf)
-    lsf = lsf * np.sign(lsf.sum())
-    mid, width = _lsf_centre_width(esf * np.sign(esf[-1] - esf[0]), oversample)
-    # far from the edge the ESF holds only noise: keep max(MAX_REACH px, 10 edge widths) a side
-    reach = max(MAX_REACH * oversample, 10.0 * width)
-    lo_b, hi_b = max(0, int(mid - reach)), min(lsf.size, int(math.ceil(mid + reach)) + 1)
-    lsf, mid = lsf[lo_b:hi_b], mid - lo_b
-    if tail_smoothing:
-        lsf = _smooth_tails(lsf, mid, max(TAIL_CORE * width, 4.0 * oversample), oversample)
-    half = max(mid, lsf.size - 1 - mid)
-    lsf_w = lsf * _window(lsf.size, mid, half, window)
-
-    nfft = 1 << max(10, int(math.ceil(math.log2(4 * lsf.size))))
-    spec = np.abs(np.fft.rfft(lsf_w, n=nfft))
-    freq = np.fft.rfftfreq(nfft, d=delta)  # cycles per pixel along the normal
-    if spec[0] <= 0:
-        raise ValueError(f"no edge found in roi {roi}: the line-spread function sums to zero")
-    mtf = spec / spec[0]
-    corr = np.sinc(freq * delta)  # two-point derivative
-    if correct_binning:
-        corr = corr * np.sinc(freq * delta)  # box average over the bin width
-    mtf = mtf / corr
-    return lsf_w, freq, mtf
 
 
 def slanted_edge_mtf(image, roi=None, *, oversample: int = 4, window: str = "hamming",
