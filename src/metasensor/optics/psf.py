@@ -189,18 +189,8 @@ def view_psfs(cfg: SystemConfig, zernike=None, depth: float = 0.0, *,
         light beyond its finite grid, a few 1e-5 of the bank's maximum
         (:mod:`metasensor.optics.bank`).
     """
-    check_config(cfg)
-    say_fallbacks(cfg)
-    z = check_zernike(zernike)
-    depth = check_depth(depth)
-    sub = check_odd(subsample, "subsample")
-    size = check_odd(size, "size")
-    npts = _check_points(cfg, points, sub)
-    os_ = check_odd(oversample, "oversample") or _default_oversample(cfg, sub)
-    if os_ % sub:
-        raise ValueError(f"oversample {os_} must be a multiple of subsample {sub}")
-    if not isinstance(band_limited, bool):
-        raise TypeError(f"band_limited must be True or False, got {band_limited!r}")
+    z, depth, sub, size, npts, os_ = _checked_settings(cfg, zernike, depth, subsample, size,
+                                                       points, oversample, band_limited)
     dev = resolve_device(device)
     dx = cfg.pixel_pitch / os_
     a_ref, w_ref, gmax = _reference_pupil(cfg, z, depth, phase, amplitude)
@@ -217,15 +207,8 @@ def view_psfs(cfg: SystemConfig, zernike=None, depth: float = 0.0, *,
 
     cpu0 = time.process_time()
     grid = npts / (cfg.nnum * sub)  # output samples per pixel/subsample (1 unless ``points``)
-    reach = _ray_reach(cfg, gmax) / cfg.pixel_pitch  # the bank spans at least ±reach pixels
-    k_min = size or 2 * int(reach * grid) + 1
-    check_memory(4.0 * cfg.nnum**2 * (k_min * sub) ** 2, f"the PSF bank ({cfg.nnum}² views of "
-                 f">= {k_min}² px: rays reach {reach:.0f} px, max |∇W| {gmax:.0f} waves/radius)")
-    _check_field_grid(cfg, *_grid(cfg, math.ceil(k_min / grid) | 1, os_), os_)  # at least
-    if size is None:
-        size = _default_size(cfg, z, depth, phase, amplitude, gmax, dev)
-        if points is not None:
-            size = math.ceil(size * grid - 1e-9) | 1
+    size = _bank_size(cfg, z, depth, phase, amplitude, gmax, size, grid, sub, os_,
+                      points is not None, dev)
     lenslets, n = _grid(cfg, math.ceil(size / grid) | 1, os_)
     _check_field_grid(cfg, lenslets, n, os_)
     plan = plan_field(cfg, n, dx, gmax)
@@ -237,6 +220,89 @@ def view_psfs(cfg: SystemConfig, zernike=None, depth: float = 0.0, *,
         _cache.stats["compute_seconds"] += time.process_time() - cpu0
         _cache.store(key, out, folder)
     return out
+
+
+def _checked_settings(cfg: SystemConfig, zernike, depth, subsample, size, points, oversample,
+                      band_limited):
+    """The settings of :func:`view_psfs`, checked (one-line errors) and completed.
+
+    Parameters
+    ----------
+    cfg, zernike, depth, subsample, size, points, oversample, band_limited
+        As :func:`view_psfs` takes them (``depth`` in metres, ``zernike`` in waves).
+
+    Returns
+    -------
+    z : numpy.ndarray or None
+        The Noll vector [waves].
+    depth : float
+        Image-side defocus [m].
+    sub : int
+        The odd subsample.
+    size : int or None
+        The odd window K, or None (the default window).
+    npts : int
+        Point positions per lenslet pitch and axis.
+    os_ : int
+        Simulation samples per pixel and axis (an odd multiple of ``sub``).
+    """
+    check_config(cfg)
+    say_fallbacks(cfg)
+    z = check_zernike(zernike)
+    depth = check_depth(depth)
+    sub = check_odd(subsample, "subsample")
+    size = check_odd(size, "size")
+    npts = _check_points(cfg, points, sub)
+    os_ = check_odd(oversample, "oversample") or _default_oversample(cfg, sub)
+    if os_ % sub:
+        raise ValueError(f"oversample {os_} must be a multiple of subsample {sub}")
+    if not isinstance(band_limited, bool):
+        raise TypeError(f"band_limited must be True or False, got {band_limited!r}")
+    return z, depth, sub, size, npts, os_
+
+
+def _bank_size(cfg: SystemConfig, z, depth, phase, amplitude, gmax: float, size, grid: float,
+               sub: int, os_: int, on_points: bool, dev) -> int:
+    """The bank's window K, after the memory checks that come before any heavy work.
+
+    Parameters
+    ----------
+    cfg, z, depth, phase, amplitude
+        The system and pupil as :func:`view_psfs` takes them.
+    gmax : float
+        Max over the pupil of ``|∇W|`` [waves per unit rho] (:func:`_reference_pupil`).
+    size : int or None
+        The given odd K, or None: :func:`_default_size` (on the ``points`` grid when
+        ``on_points``).
+    grid : float
+        Output samples per pixel / subsample (1 unless ``points``).
+    sub, os_ : int
+        Subsample and simulation samples per pixel.
+    on_points : bool
+        The bank is sampled on the ``points`` grid.
+    dev : torch.device
+        Where the widefield intensity of the default window is computed.
+
+    Returns
+    -------
+    int
+        The odd K.
+
+    Raises
+    ------
+    MemoryError
+        The bank, at the least K its rays need, or its field grid would not fit.
+    """
+    reach = _ray_reach(cfg, gmax) / cfg.pixel_pitch  # the bank spans at least ±reach pixels
+    k_min = size or 2 * int(reach * grid) + 1
+    check_memory(4.0 * cfg.nnum**2 * (k_min * sub) ** 2, f"the PSF bank ({cfg.nnum}² views of "
+                 f">= {k_min}² px: rays reach {reach:.0f} px, max |∇W| {gmax:.0f} waves/radius)")
+    _check_field_grid(cfg, *_grid(cfg, math.ceil(k_min / grid) | 1, os_), os_)  # at least
+    if size is None:
+        size = _default_size(cfg, z, depth, phase, amplitude, gmax, dev)
+        if on_points:
+            size = math.ceil(size * grid - 1e-9) | 1
+    return size
 
 
 def _default_size(cfg, z, depth, phase, amplitude, gmax, dev) -> int:
