@@ -141,15 +141,50 @@ def render_views(texture: np.ndarray, layers: list[Layer], cfg: SystemConfig,
     n, c, d = cfg.nnum, cfg.center, cfg.scan_step_px
     hv, wv = texture.shape[0] // d, texture.shape[1] // d
     mask = cfg.view_mask() if view_mask is None else np.asarray(view_mask, bool)
-    kern = _aperture_kernel(cfg)
     py = (np.arange(hv) * d + d // 2)[:, None] * np.ones((1, wv))
     px = (np.arange(wv) * d + d // 2)[None, :] * np.ones((hv, 1))
+    prepared = _prepared_layers(texture, layers, _aperture_kernel(cfg))
+    views = np.zeros((n, n, hv, wv), dtype=np.float64)
+    for u in range(n):
+        for v in range(n):
+            if mask[u, v]:
+                shift = None if shift_maps is None else shift_maps[u, v] * d
+                views[u, v] = _composited(prepared, py, px, shift, u - c, v - c)
+    truth = _front_disparity(layers, py, px)
+    clean = views.astype(np.float32)
+    noisy = clean.copy()
+    if snr_db is not None:
+        rng = np.random.default_rng(seed)
+        power = float(np.mean(clean[mask] ** 2))
+        sigma = np.sqrt(power / 10 ** (snr_db / 10))
+        noisy[mask] += rng.normal(0, sigma, size=noisy[mask].shape).astype(np.float32)
+    return SyntheticViews(noisy, clean, (truth / d).astype(np.float32), cfg)
+
+
+def _prepared_layers(texture: np.ndarray, layers: list[Layer], kern: np.ndarray) -> list:
+    """Each layer's colour and opacity blurred by the lenslet aperture and spline-prefiltered
+    once (sampled by :func:`_composited` with the prefilter off).
+
+    Parameters
+    ----------
+    texture : numpy.ndarray
+        The scene's common texture ``(H, W)`` on the image-pixel grid.
+    layers : list of Layer
+        Back to front; checked against ``texture``'s shape (one-line ``ValueError``).
+    kern : numpy.ndarray
+        The aperture kernel (:func:`_aperture_kernel`).
+
+    Returns
+    -------
+    list of tuple
+        Per layer ``(colour, opacity, constant disparity or None, disparity map or None)``,
+        disparities in image pixels per view step.
+    """
     prepared = []
     for layer in layers:
         alpha = np.clip(np.asarray(layer.alpha, dtype=np.float64), 0, 1)
         if alpha.shape != texture.shape:
             raise ValueError(f"layer alpha shape {alpha.shape} != texture {texture.shape}")
-        # blurred colour and opacity, spline-prefiltered once (sampled below with prefilter off)
         tex_l = texture if layer.texture is None else np.asarray(layer.texture, np.float64)
         if tex_l.shape != texture.shape:
             raise ValueError(f"layer texture shape {tex_l.shape} != texture {texture.shape}")
@@ -160,49 +195,60 @@ def render_views(texture: np.ndarray, layers: list[Layer], cfg: SystemConfig,
         disp = layer.disparity
         disp_map = None if np.isscalar(disp) else np.asarray(disp, dtype=np.float64)
         prepared.append((col, alp, float(disp) if disp_map is None else None, disp_map))
-    views = np.zeros((n, n, hv, wv), dtype=np.float64)
-    for u in range(n):
-        for v in range(n):
-            if not mask[u, v]:
-                continue
-            sy = np.zeros((hv, wv))
-            sx = np.zeros((hv, wv))
-            if shift_maps is not None:
-                sy = shift_maps[u, v, 0] * d
-                sx = shift_maps[u, v, 1] * d
-            out = np.zeros((hv, wv))
-            for col, alp, dconst, dmap in prepared:
-                qy, qx = py - sy, px - sx
-                if dmap is None:
-                    qy, qx = qy - dconst * (u - c), qx - dconst * (v - c)
-                else:  # fixed point Q = P − δ(Q) a, two iterations from δ(P)
-                    ey, ex = qy, qx
-                    for _ in range(3):
-                        dq = ndimage.map_coordinates(dmap, [ey, ex], order=1, mode="nearest")
-                        ey, ex = qy - dq * (u - c), qx - dq * (v - c)
-                    qy, qx = ey, ex
-                cv = ndimage.map_coordinates(col, [qy, qx], order=3, mode="mirror",
-                                             prefilter=False)
-                av = ndimage.map_coordinates(alp, [qy, qx], order=3, mode="mirror",
-                                             prefilter=False)
-                out = out * (1 - np.clip(av, 0, 1)) + cv
-            views[u, v] = out
-    # truth: the front-most opaque layer at each centre-view sample
-    truth = np.zeros((hv, wv))
+    return prepared
+
+
+def _composited(prepared: list, py: np.ndarray, px: np.ndarray, shift, du: int,
+                dv: int) -> np.ndarray:
+    """One view: the prepared layers sampled at their parallax and composited back to front
+    ("over").
+
+    Parameters
+    ----------
+    prepared : list
+        :func:`_prepared_layers`.
+    py, px : numpy.ndarray
+        The view samples' positions on the image-pixel grid ``(Hv, Wv)``.
+    shift : numpy.ndarray or None
+        The view's aberration shift ``(2, Hv, Wv)`` (dy, dx) in image pixels, or None.
+    du, dv : int
+        The view's offset from the centre view [view steps].
+
+    Returns
+    -------
+    numpy.ndarray
+        The view ``(Hv, Wv)`` float64.
+    """
+    hv, wv = py.shape
+    sy, sx = (np.zeros((hv, wv)), np.zeros((hv, wv))) if shift is None else (shift[0], shift[1])
+    out = np.zeros((hv, wv))
+    for col, alp, dconst, dmap in prepared:
+        qy, qx = py - sy, px - sx
+        if dmap is None:
+            qy, qx = qy - dconst * du, qx - dconst * dv
+        else:  # fixed point Q = P − δ(Q) a, two iterations from δ(P)
+            ey, ex = qy, qx
+            for _ in range(3):
+                dq = ndimage.map_coordinates(dmap, [ey, ex], order=1, mode="nearest")
+                ey, ex = qy - dq * du, qx - dq * dv
+            qy, qx = ey, ex
+        cv = ndimage.map_coordinates(col, [qy, qx], order=3, mode="mirror", prefilter=False)
+        av = ndimage.map_coordinates(alp, [qy, qx], order=3, mode="mirror", prefilter=False)
+        out = out * (1 - np.clip(av, 0, 1)) + cv
+    return out
+
+
+def _front_disparity(layers: list[Layer], py: np.ndarray, px: np.ndarray) -> np.ndarray:
+    """The true disparity: the front-most opaque (alpha > 0.5) layer's at each centre-view
+    sample ``(py, px)`` [image pixels per view step], 0 where none is."""
+    truth = np.zeros(py.shape)
     iy, ix = py.astype(int), px.astype(int)
     for layer in layers:
         a = np.asarray(layer.alpha)[iy, ix] > 0.5
         disp = layer.disparity
         val = disp if np.isscalar(disp) else np.asarray(disp)[iy, ix]
         truth = np.where(a, val, truth)
-    clean = views.astype(np.float32)
-    noisy = clean.copy()
-    if snr_db is not None:
-        rng = np.random.default_rng(seed)
-        power = float(np.mean(clean[mask] ** 2))
-        sigma = np.sqrt(power / 10 ** (snr_db / 10))
-        noisy[mask] += rng.normal(0, sigma, size=noisy[mask].shape).astype(np.float32)
-    return SyntheticViews(noisy, clean, (truth / d).astype(np.float32), cfg)
+    return truth
 
 
 def scene_planes(shape, near: float, far: float, seed: int = 0) -> tuple[np.ndarray, list[Layer]]:
