@@ -10,8 +10,9 @@ Pipeline (the paper's Fig. 6 and Methods, "Depth estimation"):
    their mean to the centre view, which gives a pixel straddling an occluding edge the layer at
    its centre; or SAD to the centre view; optional half-pupil occlusion handling,
    ``metasensor.depth.cost``), each slice aggregated by a
-   guided filter steered by the centre view (edge-aware cost-volume filtering, Hosni et al. 2013)
-   and, by default, the per-pixel costs also regularised by semi-global matching
+   guided filter steered by the centre view (edge-aware cost-volume filtering, Hosni et al. 2013;
+   for plain light-field views only weakly edge-aware, ``EPS_PLAIN``) and, by default, the
+   per-pixel costs also regularised by semi-global matching
    (``metasensor.depth.sgm``, Hirschmüller 2008), which decides at depth edges and thin
    structures (where the two disagree by more than ``AGREE_PX`` at the outermost view).
 3. Winner-take-all with a parabola fit, a peak-ratio confidence, then Gauss–Newton refinement of
@@ -77,6 +78,12 @@ __all__ = ["DepthResult", "estimate_depth"]
 
 
 AGREE_PX = 2.0  # window and semi-global estimates agree: outermost views within this [view px]
+# default regularisation of the guided cost aggregation (units of the guide's variance): plain
+# light-field views (scan 1) pool the cost across the texture's own edges (a small eps makes
+# every texture edge a segment border, leaving flat patches between them with a flat cost;
+# depth edges are decided by the semi-global matching), scanned views keep it edge-aware
+EPS_PLAIN = 1.0
+EPS_SCANNED = 0.01
 # weight of the centre view in the variance cost (metasensor.depth.cost), divided by scan²: it
 # decides the pixels whose one-view-pixel footprint straddles an occluding edge (scan 1); where
 # the lenslet footprint spans `scan` view pixels (the meta-imaging sensor) it would only add
@@ -149,7 +156,7 @@ def _decide(vol, cands, gf, penalties: SemiGlobal, amax: float, steps: int):
 def estimate_depth(views, cfg: SystemConfig, calibration=None, *, candidates: int | None = None,
                    disparity_range: tuple[float, float] | None = None,
                    view_mask: np.ndarray | None = None, cost: str = "variance",
-                   occlusion: bool = True, radius: int = 4, eps: float = 0.01,
+                   occlusion: bool = True, radius: int = 4, eps: float | None = None,
                    refine_iterations: int = 2, refine_radius: int | None = None,
                    fill: bool = True, fill_threshold: float = 0.1,
                    fill_radius: int | None = None, normalize: bool = True,
@@ -174,7 +181,9 @@ def estimate_depth(views, cfg: SystemConfig, calibration=None, *, candidates: in
     view_mask : boolean ``(nnum, nnum)`` of the views to use (default ``cfg.view_mask()``); it must
         contain the centre view. ``cost``: ``"variance"`` (with the centre term of step 2) or
         ``"sad"``; ``occlusion``: half-pupil occlusion handling. ``radius`` [view px] and
-        ``eps`` (relative to the guide's variance) of the guided cost aggregation.
+        ``eps`` (relative to the guide's variance) of the guided cost aggregation (also of
+        the refinement's aggregation and the fill; None: ``EPS_PLAIN`` for plain light-field
+        views, ``cfg.scan == 1``, else ``EPS_SCANNED``).
         ``refine_iterations``: Gauss–Newton steps (0 = parabola fit only), aggregated over
         ``refine_radius`` (None: ``radius``). ``fill``: replace pixels
         with confidence below ``fill_threshold`` by an edge-aware, confidence-weighted average
@@ -194,6 +203,8 @@ def estimate_depth(views, cfg: SystemConfig, calibration=None, *, candidates: in
     focal_length, focus_distance : main-lens geometry [m] overriding the config's.
     """
     arr = check_views(views, cfg)
+    if eps is None:
+        eps = EPS_PLAIN if cfg.scan == 1 else EPS_SCANNED
     mask, fill_radius = check_settings(cfg, arr, candidates, radius, refine_iterations,
                                        refine_radius, fill_radius, eps, disparity_range,
                                        view_mask, smoothing, edges, refiner, speckles)
