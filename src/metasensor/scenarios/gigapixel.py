@@ -160,14 +160,7 @@ def run_gigapixel(out: str | Path, settings: GigapixelSettings | None = None,
     The mosaics are blended on the rectangle that the registered tiles cover
     (:meth:`~metasensor.mosaic.layout.MosaicLayout.covered`), so no uncovered rim shows."""
     import metasensor as ms
-    from metasensor.io.figures import save_panel
-    from metasensor.mosaic import (
-        MosaicLayout,
-        blend_tiles,
-        open_mosaic,
-        register_tiles,
-        solve_positions,
-    )
+    from metasensor.mosaic import MosaicLayout, open_mosaic, register_tiles, solve_positions
     from metasensor.scenarios.report import scenario_run
     from metasensor.sensor.realign import lenslet_counts
     from metasensor.simulation.lens import SingleLens
@@ -198,13 +191,8 @@ def run_gigapixel(out: str | Path, settings: GigapixelSettings | None = None,
                       for k in layout.indices)
         box = layout.covered(pos)
         shape = (box[2] - box[0], box[3] - box[1])
-        placed = {k: (v[0] - box[0], v[1] - box[1]) for k, v in pos.items()}
         t_blend = time.perf_counter()
-        mosaics = [blend_tiles(paths, placed, shape, out / name, chunk=s.chunk,
-                               ramp=s.overlap // 2, pixel_size_um=cfg.pixel_pitch * 1e6,
-                               scheduler=s.scheduler)
-                   for paths, name in ((meta_paths, "mosaic.ome.zarr"),
-                                       (s2d_paths, "mosaic_2d.ome.zarr"))]
+        mosaics = _blended(out, s, cfg, pos, box, meta_paths, s2d_paths)
         t_blend = time.perf_counter() - t_blend
         cpu["blending"] = time.process_time() - c0 - cpu["registration"]
         steps.update()
@@ -212,11 +200,7 @@ def run_gigapixel(out: str | Path, settings: GigapixelSettings | None = None,
         truth = _sample(big, (margin + box[0], margin + box[1]), shape) * np.float32(scale)
         rows = _rows(truth, (("2D sensor", img_2d), ("meta-imaging", img_meta)), pos, s.grid,
                      s.jitter, box)
-        lo, hi = float(truth.min()), float(truth.max())
-        figs = {"mosaic": save_panel(out / "mosaic.png", [
-            ("ground truth", truth), ("2D sensor", np.clip(img_2d, lo, hi)),
-            ("meta-imaging sensor", np.clip(img_meta, lo, hi))], ncols=3,
-            suptitle=f"{s.grid[0]}x{s.grid[1]} mosaic, single plastic lens")}
+        figs = {"mosaic": _figure(out / "mosaic.png", s, truth, img_2d, img_meta)}
         cpu["metrics and figures"] = time.process_time() - c0 - cpu["registration"] \
             - cpu["blending"]
         summary = {
@@ -228,12 +212,64 @@ def run_gigapixel(out: str | Path, settings: GigapixelSettings | None = None,
             "mosaic_shape": shape, "mosaic_origin": box[:2], "blend_seconds": t_blend,
             "stage_cpu_seconds": cpu,
             "psf_banks": {"computed": stats["misses"] - m0, "from_cache": stats["hits"] - h0},
-            "settings": {"tile": s.tile, "grid": s.grid, "overlap": s.overlap, "jitter": s.jitter,
-                         "blocks": s.blocks, "snr_db": s.snr_db, "seed": s.seed,
-                         "space_variant": s.space_variant and s.iterations is None,
-                         "sim_blocks": s.sim_blocks},
+            "settings": _settings_record(s),
         }
         return run.finish(summary, figs, "metasensor scenario: gigapixel mosaic (ED Fig. 7)")
+
+
+def _blended(out: Path, s: GigapixelSettings, cfg, pos: dict, box, meta_paths: dict,
+             s2d_paths: dict) -> list:
+    """Blend the meta-imaging and the 2D sensor's tiles into their OME-Zarr mosaics.
+
+    Parameters
+    ----------
+    out : Path
+        The report folder (``mosaic.ome.zarr``, ``mosaic_2d.ome.zarr``).
+    s : GigapixelSettings
+        ``chunk``, ``overlap`` (the ramp is half of it) and ``scheduler``.
+    cfg : SystemConfig
+        The system (its pixel pitch in the pyramid's metadata).
+    pos : dict
+        The registered tile origins [pixels] by tile index.
+    box : tuple
+        ``(y0, x0, y1, x1)``, the covered rectangle the mosaics are blended on (pixels).
+    meta_paths, s2d_paths : dict
+        The tiles' Zarr paths by tile index.
+
+    Returns
+    -------
+    list
+        The two mosaics (meta-imaging, 2D sensor) as :func:`metasensor.mosaic.blend_tiles`
+        returns them.
+    """
+    from metasensor.mosaic import blend_tiles
+
+    shape = (box[2] - box[0], box[3] - box[1])
+    placed = {k: (v[0] - box[0], v[1] - box[1]) for k, v in pos.items()}
+    return [blend_tiles(paths, placed, shape, out / name, chunk=s.chunk, ramp=s.overlap // 2,
+                        pixel_size_um=cfg.pixel_pitch * 1e6, scheduler=s.scheduler)
+            for paths, name in ((meta_paths, "mosaic.ome.zarr"),
+                                (s2d_paths, "mosaic_2d.ome.zarr"))]
+
+
+def _figure(path: Path, s: GigapixelSettings, truth, img_2d, img_meta) -> Path:
+    """The mosaic figure: truth, 2D sensor and meta-imaging mosaics side by side, both clipped
+    to the truth's range; returns :func:`metasensor.io.figures.save_panel`'s result."""
+    from metasensor.io.figures import save_panel
+
+    lo, hi = float(truth.min()), float(truth.max())
+    return save_panel(path, [
+        ("ground truth", truth), ("2D sensor", np.clip(img_2d, lo, hi)),
+        ("meta-imaging sensor", np.clip(img_meta, lo, hi))], ncols=3,
+        suptitle=f"{s.grid[0]}x{s.grid[1]} mosaic, single plastic lens")
+
+
+def _settings_record(s: GigapixelSettings) -> dict:
+    """The settings as ``summary.json`` records them."""
+    return {"tile": s.tile, "grid": s.grid, "overlap": s.overlap, "jitter": s.jitter,
+            "blocks": s.blocks, "snr_db": s.snr_db, "seed": s.seed,
+            "space_variant": s.space_variant and s.iterations is None,
+            "sim_blocks": s.sim_blocks}
 
 
 def open_mosaic_array(path: str) -> np.ndarray:
