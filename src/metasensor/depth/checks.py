@@ -16,6 +16,7 @@ from metasensor.depth.learned import EdgeRefiner
 from metasensor.depth.sgm import SemiGlobal
 from metasensor.depth.span import MAX_CANDIDATES
 from metasensor.depth.speckle import Speckles
+from metasensor.depth.visibility import Visibility
 
 __all__ = ["check_settings", "check_views"]
 
@@ -62,7 +63,7 @@ def check_views(views, cfg: SystemConfig) -> np.ndarray:
 
 def check_settings(cfg, arr, candidates, radius, refine_iterations, refine_radius, fill_radius,
                    eps, disparity_range, view_mask, smoothing=None, edges=None,
-                   refiner=None, speckles=None) -> np.ndarray:
+                   refiner=None, speckles=None, visibility=None) -> np.ndarray:
     """Validate the settings of :func:`metasensor.depth.estimate_depth` (one-line errors).
 
     Parameters
@@ -73,7 +74,7 @@ def check_settings(cfg, arr, candidates, radius, refine_iterations, refine_radiu
         The checked views ``(nnum, nnum, H, W)`` (:func:`check_views`).
     candidates, radius, refine_iterations, refine_radius, fill_radius, eps : int, float or None
         As :func:`metasensor.depth.estimate_depth` takes them (windows in view px).
-    disparity_range, view_mask, smoothing, edges, refiner, speckles : optional
+    disparity_range, view_mask, smoothing, edges, refiner, speckles, visibility : optional
         As :func:`metasensor.depth.estimate_depth` takes them (the span in view px per view
         step).
 
@@ -97,7 +98,8 @@ def check_settings(cfg, arr, candidates, radius, refine_iterations, refine_radiu
         fill_radius = min(16, max(arr.shape[2:]))
     for name, value, kind in (("smoothing", smoothing, SemiGlobal), ("edges", edges, EdgeSnap),
                               ("refiner", refiner, EdgeRefiner),
-                              ("speckles", speckles, Speckles)):
+                              ("speckles", speckles, Speckles),
+                              ("visibility", visibility, Visibility)):
         if value is not None and not isinstance(value, kind):
             article = "an" if kind.__name__[0] in "AEIOU" else "a"
             raise TypeError(f"{name} must be {article} {kind.__name__} or None, got "

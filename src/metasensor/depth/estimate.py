@@ -17,7 +17,9 @@ Pipeline (the paper's Fig. 6 and Methods, "Depth estimation"):
    structures (where the two disagree by more than ``AGREE_PX`` at the outermost view).
 3. Winner-take-all with a parabola fit, a peak-ratio confidence, then Gauss–Newton refinement of
    the disparity on the views themselves (continuous, no candidate grid).
-4. Optional confidence-weighted, edge-aware filling of low-confidence pixels; then, by
+4. Optional confidence-weighted, edge-aware filling of low-confidence pixels; for plain
+   light-field views, by default, background pixels given a nearer layer re-decided with the
+   views that see the farther one (``metasensor.depth.visibility``); then, by
    default, each depth-edge pixel given the layer that covers more than half its footprint, as
    the views measure it (``metasensor.depth.edges``), and, for plain light-field views (scan 1),
    a small learned choice of each edge pixel's layer between the two of its neighbourhood
@@ -73,6 +75,7 @@ from metasensor.depth.span import (  # noqa: F401
     widened,
 )
 from metasensor.depth.speckle import Speckles, remove_speckles
+from metasensor.depth.visibility import Visibility, reveal_background
 
 __all__ = ["DepthResult", "estimate_depth"]
 
@@ -164,6 +167,7 @@ def estimate_depth(views, cfg: SystemConfig, calibration=None, *, candidates: in
                    edges: EdgeSnap | None = EdgeSnap(),
                    refiner: EdgeRefiner | None = EdgeRefiner(),
                    speckles: Speckles | None = Speckles(),
+                   visibility: Visibility | None = Visibility(),
                    focal_length: float | None = None, focus_distance: float | None = None,
                    device=None, progress: bool = False) -> DepthResult:
     """Disparity, confidence and depth from views ``(nnum, nnum, H, W)`` (or a ``Capture``).
@@ -192,6 +196,10 @@ def estimate_depth(views, cfg: SystemConfig, calibration=None, *, candidates: in
     smoothing : :class:`metasensor.depth.sgm.SemiGlobal` penalties of the semi-global matching
         that decides at depth edges and thin structures (default), or None: the window
         aggregation alone.
+    visibility : :class:`metasensor.depth.visibility.Visibility` settings of the re-decision of
+        pixels given a nearer layer than their neighbourhood's farthest, with the views that
+        see that farther layer (after the fill; default), or None: none. Plain light-field
+        views only.
     edges : :class:`metasensor.depth.edges.EdgeSnap` settings of the re-decision of depth-edge
         pixels by the front layer's measured coverage (default), or None: none.
     refiner : :class:`metasensor.depth.learned.EdgeRefiner` settings of the learned choice of
@@ -207,7 +215,8 @@ def estimate_depth(views, cfg: SystemConfig, calibration=None, *, candidates: in
         eps = EPS_PLAIN if cfg.scan == 1 else EPS_SCANNED
     mask, fill_radius = check_settings(cfg, arr, candidates, radius, refine_iterations,
                                        refine_radius, fill_radius, eps, disparity_range,
-                                       view_mask, smoothing, edges, refiner, speckles)
+                                       view_mask, smoothing, edges, refiner, speckles,
+                                       visibility)
     lens = geometry.main_lens_geometry(cfg, focal_length, focus_distance)
     shift_maps = resolve_shift_maps(calibration, cfg.nnum, arr.shape[2:])
     dev = resolve_device(device)
@@ -234,6 +243,8 @@ def estimate_depth(views, cfg: SystemConfig, calibration=None, *, candidates: in
         if fill:
             disp = fill_low_confidence(disp, conf, guide, radius=fill_radius,
                                        threshold=fill_threshold, eps=eps)
+        if visibility is not None and cfg.scan == 1:
+            disp = reveal_background(stack, au, av, centre, disp, conf, visibility)
         disp = _edges_decided(stack, au, av, disp, conf, amax, cfg, edges, refiner, speckles)
     return depth_result(disp, conf, idx, fill_threshold, cands, cfg, lens,
                         "given" if limit is None else "measured", sat)
