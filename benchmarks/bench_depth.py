@@ -16,7 +16,9 @@ MSE x 100) over the view minus a 15-px border, with whether the span covers the 
 scores on the pixels the estimator marks valid; each also without the learned choice of
 depth-edge pixels' layer (``refiner=None``, ``metasensor.depth.learned``), without any
 re-decision of them (also ``edges=None``, ``metasensor.depth.edges``) and, for the default,
-without the removal of speckles (``speckles=None``, ``metasensor.depth.speckle``), and on
+without the removal of speckles (``speckles=None``, ``metasensor.depth.speckle``) and without
+the re-decision of background pixels by their visible views (``visibility=None``,
+``metasensor.depth.visibility``), and on
 photographs in front of a photograph (``scenes.natural_scene``, a family neither was tuned or
 trained on). The speed rows time the default (semi-global matching) and the window aggregation
 alone in the same run.
@@ -145,11 +147,12 @@ HARD_CASES = ((9, 40.0), (5, 30.0))  # views per side, SNR [dB]
 
 
 def _hard_row(sv, n: int, smoothing, label: str, edges=ms.depth.EdgeSnap(),
-              refiner=ms.depth.EdgeRefiner(), speckles=ms.depth.Speckles()) -> dict:
+              refiner=ms.depth.EdgeRefiner(), speckles=ms.depth.Speckles(),
+              visibility=ms.depth.Visibility(), eps=None) -> dict:
     t0 = time.perf_counter()
     res = ms.estimate_depth(sv.views, sv.config, view_mask=np.ones((n, n), bool),
                             smoothing=smoothing, edges=edges, refiner=refiner,
-                            speckles=speckles)
+                            speckles=speckles, visibility=visibility, eps=eps)
     dt = time.perf_counter() - t0
     m = np.zeros(sv.disparity.shape, bool)
     m[15:-15, 15:-15] = True
@@ -181,6 +184,8 @@ def _hard_rows(size: int) -> list[dict]:
             rows.append(_hard_row(sv, n, ms.depth.SemiGlobal(), name))
             rows.append(_hard_row(sv, n, ms.depth.SemiGlobal(), name + ", no speckle removal",
                                   speckles=None))
+            rows.append(_hard_row(sv, n, ms.depth.SemiGlobal(),
+                                  name + ", no visibility re-decision", visibility=None))
             rows.append(_hard_row(sv, n, ms.depth.SemiGlobal(), name + ", no learned refiner",
                                   refiner=None))
             rows.append(_hard_row(sv, n, ms.depth.SemiGlobal(), name + ", no edge re-decision",
@@ -193,7 +198,8 @@ def _hard_rows(size: int) -> list[dict]:
 def _natural_rows(size: int, seeds=(1, 2, 3, 4)) -> list[dict]:
     """Photographs in front of a photograph (``scenes.natural_scene``, a family the edge
     re-decision was not tuned on and the learned refiner not trained on), default settings,
-    without the learned refiner and without any edge re-decision."""
+    without the visibility re-decision, without the learned refiner, without any edge
+    re-decision, and with the edge-aware cost aggregation of scanned views (eps 0.01)."""
     from metasensor.depth.scenes import natural_scene
 
     rows = []
@@ -202,10 +208,15 @@ def _natural_rows(size: int, seeds=(1, 2, 3, 4)) -> list[dict]:
             sv = natural_scene(nnum=n, size=size, max_disparity=3.0, snr_db=snr, seed=seed)
             name = f"natural {n}x{n} scan 1 ±3 {snr:g} dB: seed {seed} ({size} px)"
             rows.append(_hard_row(sv, n, ms.depth.SemiGlobal(), name))
+            rows.append(_hard_row(sv, n, ms.depth.SemiGlobal(),
+                                  name + ", no visibility re-decision", visibility=None))
             rows.append(_hard_row(sv, n, ms.depth.SemiGlobal(), name + ", no learned refiner",
                                   refiner=None))
             rows.append(_hard_row(sv, n, ms.depth.SemiGlobal(), name + ", no edge re-decision",
                                   edges=None, refiner=None))
+            rows.append(_hard_row(sv, n, ms.depth.SemiGlobal(),
+                                  name + ", edge-aware cost aggregation (eps 0.01)",
+                                  eps=0.01))
     return rows
 
 
