@@ -46,6 +46,10 @@ def test_settings_are_validated():
         DepthLayers(min_fraction=0.5)
     with pytest.raises(ValueError, match="median_samples"):
         DepthLayers(median_samples=4)
+    with pytest.raises(ValueError, match="seed_vote"):
+        DepthLayers(seed_vote=0.5)
+    with pytest.raises(ValueError, match="segment_scale"):
+        DepthLayers(segment_scale=0)
     with pytest.raises(ValueError, match="min_separation"):
         DepthLayers(min_separation=0.0)
     from metasensor.scenarios.plastic_wrap import PlasticWrapSettings
@@ -131,3 +135,57 @@ def test_two_layers_bring_the_nearer_card_into_focus(half_card):
     # than doubles, the chart holds (within 5 %)
     assert f_two[1] > 2 * f_off[1]
     assert f_two[0] >= 0.95 * f_off[0]
+
+
+def _box_block(n: int = 40):
+    """A block on the view grid: a grey card (rows/cols 10-29) on a white chart with dark bars;
+    the card's left half textured (its disparity 0.5 read with confidence), its right half flat
+    (read as the chart's 0.0, little confidence), a halo of -0.4 one sample outside its border;
+    the chart at 0.0 with noise."""
+    rng = np.random.default_rng(0)
+    guide = np.ones((n, n))
+    guide[2:6, 4:36:6] = 0.1  # bars
+    guide[34:38, 4:36:6] = 0.1
+    card = np.zeros((n, n), bool)
+    card[10:30, 10:30] = True
+    guide[card] = 0.6
+    guide[10:30, 10:20] += 0.15 * rng.standard_normal((20, 10))  # the card's texture
+    disp = 0.03 * rng.standard_normal((n, n))
+    conf = np.full((n, n), 0.4)
+    disp[10:30, 10:20] += 0.5
+    conf[10:30, 20:30] = 0.05  # flat: the chart's disparity, guessed
+    halo = np.zeros((n, n), bool)
+    halo[9:31, 9:31] = True
+    halo &= ~card
+    disp[halo] = -0.4
+    return guide, disp, conf, card
+
+
+def test_segments_give_a_flat_part_of_the_card_its_layer():
+    from skimage.filters import threshold_otsu
+
+    from metasensor.recon.layer_segments import segment_layers
+
+    guide, disp, conf, card = _box_block()
+    valid = np.ones(disp.shape, bool)
+    use = np.zeros(disp.shape, bool)
+    use[3:-3, 3:-3] = True
+    thr = float(threshold_otsu(disp[use]))
+    per_pixel = disp > thr
+    assert (per_pixel & card).sum() <= 0.55 * card.sum()  # the flat half reads the chart
+    found = segment_layers(disp, conf, valid, guide, use, thr, DepthLayers())
+    lab = found.labels.astype(bool)
+    # the card's border is an edge of the image: the whole card, nothing of the chart
+    assert (lab & card).sum() >= 0.9 * card.sum()  # measured 0.93 (per pixel: 0.5)
+    assert (lab & ~card).sum() <= 0.01 * (~card).sum()
+    assert abs(found.disparity[1] - 0.5) < 0.05 and abs(found.disparity[0]) < 0.05
+
+
+def test_segments_without_a_clear_vote_for_one_layer_give_one_layer():
+    from metasensor.recon.layer_segments import segment_layers
+
+    guide, disp, conf, card = _box_block()
+    disp[card] = 0.03  # the card reads the chart's disparity everywhere
+    use = np.ones(disp.shape, bool)
+    assert segment_layers(disp, conf, np.ones(disp.shape, bool), guide, use, 0.25,
+                          DepthLayers()) is None

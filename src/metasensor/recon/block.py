@@ -317,26 +317,39 @@ def _reconstruct(task: BlockTask, started) -> BlockResult:
     if bank.ndim != 4 or bank.shape[:2] != (cfg.nnum, cfg.nnum):
         raise ValueError(f"psf bank must have shape (nnum, nnum, K, K) with nnum = {cfg.nnum}, "
                          f"got {bank.shape}")
-    if task.layers is not None:  # the depth-aware model: one bank per layer where it sees two
-        from metasensor.recon.layers import layered_operator
-
-        layered = layered_operator(task, window, zernike, rows, cols)
-        if layered is not None:
-            op, found = layered
-            res = _solve(task, op, window[rows, cols], zernike, dao_history, [], None, estimate,
-                         started)
-            return replace(res, dao_fit_px=fit,
-                           layers=tuple(float(v) for v in found.disparity))
     op, registration, reg_zernike = _operator(task, bank[rows, cols], window[rows, cols])
-    res = _solve(task, op, window[rows, cols], zernike, dao_history, registration, reg_zernike,
-                 estimate, started)
-    return replace(res, dao_fit_px=fit)
+    res, full = _solve(task, op, window[rows, cols], zernike, dao_history, registration,
+                       reg_zernike, estimate, started, full=True)
+    res = replace(res, dao_fit_px=fit)
+    if task.layers is None:
+        return res
+    return _layered(task, window, zernike, rows, cols, res, full, dao_history, estimate)
+
+
+def _layered(task: BlockTask, window: np.ndarray, zernike, rows, cols, res: BlockResult,
+             full: np.ndarray, dao_history, estimate) -> BlockResult:
+    """The depth-aware model (:mod:`metasensor.recon.layers`): where the block's views show two
+    depth layers (decided on its one-bank image ``full``, the window's pixels), the block
+    solved again with one bank per layer; else ``res`` as it is."""
+    from metasensor.recon.layer_segments import pool_to_views
+    from metasensor.recon.layers import layered_operator
+
+    guide = pool_to_views(full, task.cfg.scan_step_px)
+    layered = layered_operator(task, window, zernike, rows, cols, guide)
+    if layered is None:
+        return res
+    op, found = layered
+    quiet = replace(task, progress=None)  # the bar counts one solve per block
+    two = _solve(quiet, op, window[rows, cols], zernike, dao_history, [], None, estimate)
+    return replace(two, dao_fit_px=res.dao_fit_px,
+                   layers=tuple(float(v) for v in found.disparity))
 
 
 def _solve(task: BlockTask, op, data_win: np.ndarray, zernike, dao_history, registration,
-           reg_zernike, estimate=None, started=None) -> BlockResult:
+           reg_zernike, estimate=None, started=None, full: bool = False):
     """Solve the block on ``op`` and cut its region out of the estimate (``estimate``: DAO's,
-    applied when it is ``zernike`` itself; ``started``: called at the solver's every step)."""
+    applied when it is ``zernike`` itself; ``started``: called at the solver's every step);
+    ``full``: also the estimate over the whole window (a ``(BlockResult, image)`` pair)."""
     import torch
 
     from metasensor.solvers import solve
@@ -352,7 +365,8 @@ def _solve(task: BlockTask, op, data_win: np.ndarray, zernike, dao_history, regi
     result = solve(op, data, mask, task.solver, progress=progress)
     image = op.geometry.crop(result.estimate).detach().cpu().numpy()
     ry, rx = task.block.region_in_window()
-    return BlockResult(task.block, np.ascontiguousarray(image[ry, rx], dtype=np.float32),
-                       zernike, result.history, dao_history, registration, reg_zernike,
-                       None if estimate is None else estimate is zernike,  # applied: the same
-                       estimate)
+    out = BlockResult(task.block, np.ascontiguousarray(image[ry, rx], dtype=np.float32),
+                      zernike, result.history, dao_history, registration, reg_zernike,
+                      None if estimate is None else estimate is zernike,  # applied: the same
+                      estimate)
+    return (out, image) if full else out

@@ -18,16 +18,21 @@ simulator renders depth the same way).
    median-filtered; its confident values inside the block's region split in two by Otsu's
    threshold (Otsu, IEEE Trans. SMC 9, 62, 1979). Two layers when the halves' medians lie at
    least ``min_separation`` apart and each holds ``min_fraction`` of the values; else one
-   layer, and the block is reconstructed exactly as without this model.
+   layer, and the block is reconstructed exactly as without this model. Where they split,
+   the layers are decided again on the block's one-bank reconstruction
+   (:func:`metasensor.recon.layer_segments.segment_layers`: image segments with a clear
+   confidence-weighted vote seed the layers, a random walker on the image labels the rest,
+   so the split follows the image's edges), under the same two tests.
 2. :func:`layer_zernikes`: the block's Noll vector plus the Noll-4 and Noll-11 projection of
    the angular-spectrum defocus (:func:`metasensor.optics.pupil.defocus_waves`) of each layer's
    image-side depth ``z = δ · d · mla_focal`` (:func:`metasensor.depth.geometry.
    disparity_to_image_depth`).
 3. :func:`favour_sharper`: the layer whose wavefront is smaller (r.m.s. over Noll 4-45) grows
-   by ``grow_samples`` view samples into the other: near the layers' border the split is
-   uncertain, and a point deconvolved with a PSF narrower than its own comes out blurred,
-   while one deconvolved with a wider PSF than its own rings (docs/decisions.md, "the
-   depth-aware block model").
+   by ``grow_samples`` view samples into the other (default none): where the split is
+   uncertain at the border, a point deconvolved with a PSF narrower than its own comes out
+   blurred, while one deconvolved with a wider PSF than its own rings; a split that follows
+   the image's edges is better left as it is (docs/decisions.md, "the depth-aware block
+   model" and "the layers decided on the image").
 4. :func:`layer_weights`: each layer's indicator on the view grid, repeated onto the pixel grid,
    continued by its edge values over the operator's padded domain, feathered by a Gaussian and
    normalised to a partition of unity.
@@ -64,25 +69,36 @@ class DepthLayers:
         Share of the block's confident disparities each layer must hold (default 0.1).
     feather_px : float
         Standard deviation (image pixels) of the Gaussian that feathers the layer masks
-        (default 3: one view sample of the 5 x 5 scan).
+        (default 0.5: the split follows the image's edges, so the masks stay nearly hard).
     median_samples : int
         Side (view samples, odd) of the median filter on the disparity (default 5).
     grow_samples : int
-        View samples by which the sharper layer grows into the other (default 1).
+        View samples by which the sharper layer grows into the other (default 0: where the
+        split follows the image's edges, a grown layer blurs the other's border).
     edge_samples : int
         View samples at the window's edges left out of the layer statistics (default 3: the
         disparity there sees past the window).
+    segment_scale : float
+        Scale of the Felzenszwalb segmentation of the block's one-bank image (normalised to
+        [0, 1]) whose segments vote on the layers (default 100: larger, fewer and larger
+        segments).
+    seed_vote : float
+        Confidence-weighted share of a segment's pixels that must read one layer's disparity
+        for the segment to seed that layer (default 0.75; in (0.5, 1)); the random walker on
+        the image labels the rest (:mod:`metasensor.recon.layer_segments`).
     """
 
     min_separation: float = 0.25
     min_fraction: float = 0.1
-    feather_px: float = 3.0
+    feather_px: float = 0.5
     median_samples: int = 5
-    grow_samples: int = 1
+    grow_samples: int = 0
     edge_samples: int = 3
+    segment_scale: float = 100.0
+    seed_vote: float = 0.75
 
     def __post_init__(self) -> None:
-        for name in ("min_separation", "feather_px"):
+        for name in ("min_separation", "feather_px", "segment_scale"):
             v = getattr(self, name)
             if isinstance(v, bool) or not (isinstance(v, int | float) and math.isfinite(v)
                                            and v > 0):
@@ -90,6 +106,9 @@ class DepthLayers:
         f = self.min_fraction
         if isinstance(f, bool) or not (isinstance(f, int | float) and 0 < f < 0.5):
             raise ValueError(f"min_fraction must lie in (0, 0.5), got {f!r}")
+        v = self.seed_vote
+        if isinstance(v, bool) or not (isinstance(v, int | float) and 0.5 < v < 1):
+            raise ValueError(f"seed_vote must lie in (0.5, 1), got {v!r}")
         m = self.median_samples
         if isinstance(m, bool) or not (isinstance(m, int) and m >= 1 and m % 2):
             raise ValueError(f"median_samples must be a positive odd integer, got {m!r}")
@@ -140,7 +159,8 @@ def _residual_disparity(window: np.ndarray, cfg: SystemConfig, zernike, device):
 
 
 def find_layers(window: np.ndarray, cfg: SystemConfig, zernike, region: tuple[slice, slice],
-                settings: DepthLayers, device=None) -> LayerMap | None:
+                settings: DepthLayers, device=None, guide: np.ndarray | None = None
+                ) -> LayerMap | None:
     """Two depth layers of a block, or None (one layer).
 
     Parameters
@@ -154,6 +174,11 @@ def find_layers(window: np.ndarray, cfg: SystemConfig, zernike, region: tuple[sl
         The block's region in the window's view samples (where the statistics are taken).
     settings : DepthLayers
     device : str, optional
+    guide : numpy.ndarray, optional
+        ``(h, w)`` the block's image on the view grid (its one-bank reconstruction pooled,
+        :func:`metasensor.recon.layer_segments.pool_to_views`): where the pixels' split finds
+        two layers, the layers are decided per segment of this image
+        (:func:`metasensor.recon.layer_segments.segment_layers`). None: per pixel.
 
     Returns
     -------
@@ -172,9 +197,8 @@ def find_layers(window: np.ndarray, cfg: SystemConfig, zernike, region: tuple[sl
     if e:
         use[:e] = use[-e:] = False
         use[:, :e] = use[:, -e:] = False
-    if res.valid is not None:
-        use &= np.asarray(res.valid, bool)
-    values = disp[use]
+    valid = np.ones(disp.shape, bool) if res.valid is None else np.asarray(res.valid, bool)
+    values = disp[use & valid]
     if values.size < 16 or np.ptp(values) < settings.min_separation:
         return None
     thr = float(threshold_otsu(values))
@@ -183,6 +207,10 @@ def find_layers(window: np.ndarray, cfg: SystemConfig, zernike, region: tuple[sl
     medians = np.array([np.median(low), np.median(high)])
     if medians[1] - medians[0] < settings.min_separation or fraction.min() < settings.min_fraction:
         return None
+    if guide is not None:
+        from metasensor.recon.layer_segments import segment_layers
+
+        return segment_layers(res.disparity, res.confidence, valid, guide, use, thr, settings)
     return LayerMap(disparity=medians, labels=(disp > thr).astype(np.uint8), fraction=fraction)
 
 
@@ -239,9 +267,10 @@ def layer_weights(labels: np.ndarray, geometry, feather_px: float) -> np.ndarray
     return np.stack([1.0 - near, near]).astype(np.float32)
 
 
-def layered_operator(task, window: np.ndarray, zernike, rows, cols):
+def layered_operator(task, window: np.ndarray, zernike, rows, cols, guide=None):
     """The block's two-layer operator and the layers' disparities, or None where the block is
-    one layer (``task.layers``: :class:`DepthLayers`; ``zernike``: the block's Noll vector).
+    one layer (``task.layers``: :class:`DepthLayers`; ``zernike``: the block's Noll vector;
+    ``guide``: the block's one-bank image on the view grid, :func:`find_layers`).
     Each layer's bank is ``task.psf_fn``'s or ``view_psfs``' of its Noll vector, in a window
     sized by its ray reach (:func:`metasensor.dao.banks.psf_window`)."""
     from metasensor.dao.banks import psf_window
@@ -252,7 +281,8 @@ def layered_operator(task, window: np.ndarray, zernike, rows, cols):
     d = task.cfg.scan_step_px
     ry, rx = task.block.region_in_window()
     region = (slice(ry.start // d, ry.stop // d), slice(rx.start // d, rx.stop // d))
-    found = find_layers(window, task.cfg, zernike, region, task.layers, task.device)
+    found = find_layers(window, task.cfg, zernike, region, task.layers, task.device,
+                        guide)
     if found is None:
         return None
     zernikes = layer_zernikes(task.cfg, zernike, found.disparity)
