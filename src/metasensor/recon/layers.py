@@ -32,7 +32,7 @@ simulator renders depth the same way).
    uncertain at the border, a point deconvolved with a PSF narrower than its own comes out
    blurred, while one deconvolved with a wider PSF than its own rings; a split that follows
    the image's edges is better left as it is (docs/decisions.md, "the depth-aware block
-   model" and "the layers decided on the image").
+   model" and "the depth-aware block model's layers decided on the image").
 4. :func:`layer_weights`: each layer's indicator on the view grid, repeated onto the pixel grid,
    continued by its edge values over the operator's padded domain, feathered by a Gaussian and
    normalised to a partition of unity.

@@ -48,7 +48,8 @@ class PlasticWrapSettings(ScenarioSettings):
     figures: docs/decisions.md, "DAO on the plastic wrap"); chart : "bars" or "chart"
     (the scene behind the near object); depth_layers : the meta-imaging reconstruction's
     depth-aware block model (``reconstruct``'s option, "off" by default or "auto"; HQS only, so
-    "off" with ``iterations``; why off: docs/decisions.md, "the depth-aware block model")."""
+    "off" with ``iterations``; why off: docs/decisions.md, "the depth-aware block model" and
+    "the depth-aware block model's layers decided on the image")."""
 
     size: int = 240
     chart: str = "bars"
