@@ -285,7 +285,7 @@ def test_misfit_weights_only_where_the_model_does_not_fit(bank, monkeypatch):
     calls = []
     real = hqs_module.misfit_weights
     monkeypatch.setattr(hqs_module, "misfit_weights",
-                        lambda *a: calls.append(1) or real(*a))
+                        lambda *a: calls.append(a) or real(*a))
     quick = Continuation(beta_max=64.0)
     g = make_geometry((30, 30), 3, bank.shape[-1] // 2, pad=True)
     mask = torch.zeros(g.grid, dtype=torch.bool)
@@ -308,6 +308,10 @@ def test_misfit_weights_only_where_the_model_does_not_fit(bank, monkeypatch):
         del calls[:]
         x = hqs(op, y, mask, HQSOptions(continuation=quick)).estimate
         assert bool(calls) == weighted
+        if calls:  # floored at the fit's r.m.s. misfit: no position above the global weight
+            resid, m = calls[0][0], calls[0][1]
+            rms = float(torch.sqrt((resid[:, m] ** 2).mean()))
+            assert calls[0][2] == pytest.approx(rms, rel=1e-4) and calls[0][3] == 3
         one = hqs(op, y, mask, HQSOptions(continuation=quick, misfit_weights=None)).estimate
         assert torch.equal(x, one) != weighted
         errors.append([float(torch.sqrt(((v - truth)[win] ** 2).mean())) for v in (x, one)])
@@ -316,3 +320,6 @@ def test_misfit_weights_only_where_the_model_does_not_fit(bank, monkeypatch):
     for bad in (0.0, -1.0, True, float("nan"), "1.1"):
         with pytest.raises(ValueError, match="misfit_weights"):
             HQSOptions(misfit_weights=bad)
+    for bad in (0, 2, True, 3.0):
+        with pytest.raises(ValueError, match="misfit_pool"):
+            HQSOptions(misfit_pool=bad)

@@ -235,3 +235,24 @@ def test_misfit_weights_follow_the_local_misfit_above_the_noise():
     for bad in (0.0, -1.0, float("nan"), float("inf")):
         with pytest.raises(ValueError, match="noise"):
             misfit_weights(r, mask, bad)
+
+
+def test_pooled_misfit_weights_are_smooth_over_the_box_around_a_miss():
+    # pool 3: each position's mean squared residual is averaged over the observed positions of
+    # its 3 x 3 box, so one missed position lowers the weights of its whole 3 x 3
+    # neighbourhood alike instead of one view sample alone; unobserved positions do not count.
+    r = torch.full((9, 12, 12), 0.3)
+    mask = torch.ones((12, 12), dtype=torch.bool)
+    mask[:, :2] = False
+    r[:, 5, 6] = 3.0
+    w, s2 = misfit_weights(r, mask, 1.0, pool=3)
+    var = (9.0 + 8 * 0.09) / 9  # the box around (5, 6): one miss and eight samples at 0.3
+    box = w[4:7, 5:8]
+    assert torch.allclose(box, torch.full_like(box, s2 / var))
+    assert float(w[0, 5]) == pytest.approx(s2) and float(w[5, 4]) == pytest.approx(s2)
+    edge = misfit_weights(r, mask, 0.2, pool=3)[0]  # column 2's box has unobserved columns
+    assert float(edge[0, 2]) == pytest.approx(float(edge[0, 3]))
+    assert torch.equal(misfit_weights(r, mask, 1.0, pool=1)[0], misfit_weights(r, mask, 1.0)[0])
+    for bad in (0, 2, -3, 1.0):
+        with pytest.raises(ValueError, match="pool"):
+            misfit_weights(r, mask, 1.0, pool=bad)

@@ -34,26 +34,29 @@ preconditioned by the circular unweighted solve.
 Model error (a bank that is an estimate, a wavefront or scene that moves during the scan) sits
 where the scene has structure, not everywhere as noise does: where the nearly unregularised
 fit's r.m.s. misfit exceeds ``misfit_weights`` times the noise, the data term is weighted by
-each sample position's own misfit in that fit
-(:func:`metasensor.solvers.noise_model.misfit_weights`), as above.
+each sample position's own misfit in that fit, averaged over ``misfit_pool`` × ``misfit_pool``
+positions and floored at the fit's r.m.s. misfit
+(:func:`metasensor.solvers.noise_model.misfit_weights`), as above: positions the model misses
+get less than the global weight, none more (that fit absorbs part of the model error, so a
+position's own misfit under-states it).
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
 
 import torch
 
 from metasensor.phasespace.masked_normal import BandNormal
 from metasensor.phasespace.normal import FoldedNormal
 from metasensor.phasespace.operator import PhaseSpaceOperator
-from metasensor.solvers.noise_model import PoissonGaussian, misfit_weights, sample_weights
+from metasensor.solvers.hqs_options import HQSOptions
+from metasensor.solvers.noise_model import misfit_weights, sample_weights
 from metasensor.solvers.pcg import preconditioned_cg
-from metasensor.solvers.priors import GRADIENT, HyperLaplacian, Prior, Transform
+from metasensor.solvers.priors import GRADIENT, Transform
 from metasensor.solvers.result import SolveResult
-from metasensor.solvers.splitting import Continuation, half_quadratic_splitting
+from metasensor.solvers.splitting import half_quadratic_splitting
 
 __all__ = ["HQSOptions", "hqs", "estimate_noise", "FoldedXStep"]
 
@@ -61,95 +64,6 @@ REG_FLOOR = 1e-4  # ε of the x-step, relative to LᵀL
 MISFIT_REG = 1e-4  # smoothness weight of the fit whose misfit bounds the data weight
 INIT_CG = 10  # CG iterations of the start where margins are unobserved
 REF_STEP = 3  # scan step (px) of the 5 x 5 scan lam_scale was chosen on
-
-
-@dataclass(frozen=True)
-class HQSOptions:
-    """Settings of :func:`hqs` (frozen, validated).
-
-    Attributes
-    ----------
-    prior : Prior
-        The image prior (:mod:`metasensor.solvers.priors`); default the isotropic
-        hyper-Laplacian (gradient magnitude), alpha 2/3.
-    lam : float or None
-        λ, the data weight on the mean-0.5 image; None: from the noise and the model error
-        (module docstring).
-    lam_scale : float
-        λ·σ² when λ is derived (default 0.3).
-    noise : float or None
-        The views' noise r.m.s. in data units; None: :func:`estimate_noise`.
-    noise_model : PoissonGaussian or None
-        The views' Poisson–Gaussian noise (:mod:`metasensor.solvers.noise_model`): the data
-        term becomes weighted least squares, each sample weighed by ``1 / var`` of the smooth
-        start's prediction, and σ the harmonic mean of those variances (``noise`` is then
-        unused); None: one weight for every sample.
-    continuation : Continuation
-        The β schedule (default 1 → 4096 in steps of 2√2).
-    inner : int
-        w-step / x-step rounds per β (default 3).
-    cg : int
-        Conjugate-gradient iterations per x-step where margins are unobserved, at most
-        (default 3).
-    cg_tol : float
-        A masked x-step's conjugate gradients stop once the residual of its system is below
-        ``cg_tol`` times its right-hand side (2-norms; default 1e-4, just above the float32
-        floor of these products: ``docs/decisions.md``); 0: always ``cg`` iterations.
-    init_reg : float
-        Smoothness weight of the start, relative to AᵀA's largest diagonal (default 1e-2).
-    misfit_weights : float or None
-        Without a ``noise_model``: where the nearly unregularised fit's r.m.s. misfit exceeds
-        this many times the noise (the model does not fit the data), weigh each view-sample
-        position by its local misfit (module docstring; default 1.1, ``docs/decisions.md``);
-        None: one global weight always.
-    """
-
-    prior: Prior = HyperLaplacian(isotropic=True)
-    lam: float | None = None
-    lam_scale: float = 0.3
-    noise: float | None = None
-    noise_model: PoissonGaussian | None = None
-    continuation: Continuation = Continuation(beta_max=4096.0)
-    inner: int = 3
-    cg: int = 3
-    cg_tol: float = 1e-4
-    init_reg: float = 1e-2
-    misfit_weights: float | None = 1.1
-
-    def __post_init__(self) -> None:
-        if not isinstance(self.prior, Prior):
-            raise TypeError(f"prior must have a transform and prox(z, weight), got "
-                            f"{type(self.prior).__name__}")
-        if self.lam is not None and not (self.lam > 0 and math.isfinite(self.lam)):
-            raise ValueError(f"lam must be positive and finite, got {self.lam!r}")
-        for name in ("lam_scale", "init_reg"):
-            value = getattr(self, name)
-            if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
-                raise ValueError(f"{name} must be > 0, got {value!r}")
-        mw = self.misfit_weights
-        if mw is not None and (isinstance(mw, bool) or not (
-                isinstance(mw, int | float) and math.isfinite(mw) and mw > 0)):
-            raise ValueError(f"misfit_weights must be a positive number or None, got {mw!r}")
-        if not (isinstance(self.cg_tol, int | float) and 0 <= self.cg_tol < 1):
-            raise ValueError(f"cg_tol must be in [0, 1), got {self.cg_tol!r}")
-        if self.noise is not None and not (self.noise >= 0 and math.isfinite(self.noise)):
-            raise ValueError(f"noise must be a non-negative number, got {self.noise!r}")
-        if self.noise_model is not None and not isinstance(self.noise_model, PoissonGaussian):
-            raise TypeError(f"noise_model must be a PoissonGaussian, got "
-                            f"{type(self.noise_model).__name__}")
-        if not isinstance(self.continuation, Continuation):
-            raise TypeError("continuation must be a Continuation")
-        for name in ("inner", "cg"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int) or value < (
-                    1 if name == "inner" else 0):
-                raise ValueError(f"{name} must be an integer >= {1 if name == 'inner' else 0}, "
-                                 f"got {value!r}")
-
-    @property
-    def steps(self) -> int:
-        """Progress ticks (one per β) a solve makes."""
-        return len(self.continuation.betas())
 
 
 def estimate_noise(data: torch.Tensor, mask: torch.Tensor) -> float:
@@ -279,15 +193,18 @@ def _misfit_weights(op, smooth: FoldedXStep, x, aty, y, m, unit: float, options:
     yn = y / unit
     sigma = estimate_noise(y, m) if options.noise is None else float(options.noise)
     noise = sigma / unit
-    bound = options.misfit_weights * noise * math.sqrt(max(float(mf.sum()) * yn.shape[0], 1.0))
+    root_n = math.sqrt(max(float(mf.sum()) * yn.shape[0], 1.0))
+    bound = options.misfit_weights * noise * root_n
     if not (noise > 0 and _residual_norm(op, x, smooth.data_product(x), aty, yn, mf, yy)
             > bound):
         return None, sigma, None
     fit = smooth.at(MISFIT_REG * smooth.scale)(aty, None)
     resid = op.forward(fit) - yn
-    if not float(torch.linalg.vector_norm(resid * mf)) > bound:
+    norm = float(torch.linalg.vector_norm(resid * mf))
+    if not norm > bound:
         return None, sigma, fit
-    weights, sigma2 = misfit_weights(resid, m, noise)
+    # floored at the fit's r.m.s. misfit: the weights only ever lower the global one
+    weights, sigma2 = misfit_weights(resid, m, max(noise, norm / root_n), options.misfit_pool)
     return weights, math.sqrt(sigma2) * unit, fit
 
 

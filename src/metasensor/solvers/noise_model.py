@@ -25,8 +25,8 @@ during the scan, leaves residuals where the scene has structure, and one global 
 fit explain them there with spurious detail. :func:`misfit_weights` weighs each sample position
 by its own misfit instead, ``var = max(σ², mean over the views of r²)`` of a first fit's
 residual ``r``: one step of iteratively reweighted least squares (Holland & Welsch,
-Commun. Stat. 6, 813–827, 1977) with the noise as the floor, so the samples the model explains
-keep the noise's weight.
+Commun. Stat. 6, 813–827, 1977) with a floor ``σ`` (the noise, or a caller's larger level), so
+the samples the model explains keep the floor's weight.
 """
 
 from __future__ import annotations
@@ -149,7 +149,7 @@ def sample_weights(model: PoissonGaussian, level: torch.Tensor, mask: torch.Tens
     return (inv * sigma2).to(torch.float32), sigma2
 
 
-def misfit_weights(residual: torch.Tensor, mask: torch.Tensor, noise: float
+def misfit_weights(residual: torch.Tensor, mask: torch.Tensor, noise: float, pool: int = 1
                    ) -> tuple[torch.Tensor, float]:
     """Per-position weights of a data term from a fit's local misfit (module docstring).
 
@@ -161,21 +161,34 @@ def misfit_weights(residual: torch.Tensor, mask: torch.Tensor, noise: float
     mask : torch.Tensor
         ``(My, Mx)`` bool, True on observed samples.
     noise : float
-        The samples' noise r.m.s. in the residual's units, > 0: the variance floor.
+        The floor of the r.m.s. misfit in the residual's units (the samples' noise or more),
+        > 0.
+    pool : int
+        Odd side (sample positions) of the box over which the mean squared residual is
+        averaged (observed positions only), so that the weights vary smoothly over the field
+        rather than from one view sample to the next; 1: each position alone.
 
     Returns
     -------
     weights : torch.Tensor
-        ``(My, Mx)`` float32, ``σ² / var`` with ``var = max(noise², mean_v residual²)`` at each
-        observed position (the same for every view): mean 1 over the observed positions, 0
+        ``(My, Mx)`` float32, ``σ² / var`` with ``var = max(noise², mean residual²)`` at each
+        observed position, the mean taken over the views and the ``pool`` × ``pool`` observed
+        positions around it (the same for every view): mean 1 over the observed positions, 0
         where unobserved.
     sigma2 : float
         ``σ²``, the harmonic mean of the observed positions' variances (residual units²).
     """
     if not (noise > 0 and math.isfinite(noise)):
         raise ValueError(f"noise must be positive and finite, got {noise!r}")
+    if not (isinstance(pool, int) and pool >= 1 and pool % 2 == 1):
+        raise ValueError(f"pool must be an odd positive integer, got {pool!r}")
     m = mask.to(torch.bool)
     local = (residual.to(torch.float32) ** 2).mean(0)
+    if pool > 1:
+        mf = m.to(torch.float32)
+        box = [torch.nn.functional.avg_pool2d(a[None, None], pool, stride=1,
+                                              padding=pool // 2)[0, 0] for a in (local * mf, mf)]
+        local = box[0] / torch.clamp(box[1], min=1e-12)
     var = torch.where(m, torch.clamp(local, min=noise**2), torch.ones_like(local))
     inv = m.to(torch.float32) / var
     sigma2 = float(m.sum()) / max(float(inv.sum()), 1e-30)

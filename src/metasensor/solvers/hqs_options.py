@@ -1,0 +1,110 @@
+"""Settings of the half-quadratic-splitting solver (:func:`metasensor.solvers.hqs.hqs`): a frozen,
+validated option object; the model each setting enters is described in
+:mod:`metasensor.solvers.hqs`."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from metasensor.solvers.noise_model import PoissonGaussian
+from metasensor.solvers.priors import HyperLaplacian, Prior
+from metasensor.solvers.splitting import Continuation
+
+__all__ = ["HQSOptions"]
+
+
+@dataclass(frozen=True)
+class HQSOptions:
+    """Settings of :func:`~metasensor.solvers.hqs.hqs` (frozen, validated).
+
+    Attributes
+    ----------
+    prior : Prior
+        The image prior (:mod:`metasensor.solvers.priors`); default the isotropic
+        hyper-Laplacian (gradient magnitude), alpha 2/3.
+    lam : float or None
+        λ, the data weight on the mean-0.5 image; None: from the noise and the model error
+        (module docstring).
+    lam_scale : float
+        λ·σ² when λ is derived (default 0.3).
+    noise : float or None
+        The views' noise r.m.s. in data units; None: :func:`estimate_noise`.
+    noise_model : PoissonGaussian or None
+        The views' Poisson–Gaussian noise (:mod:`metasensor.solvers.noise_model`): the data
+        term becomes weighted least squares, each sample weighed by ``1 / var`` of the smooth
+        start's prediction, and σ the harmonic mean of those variances (``noise`` is then
+        unused); None: one weight for every sample.
+    continuation : Continuation
+        The β schedule (default 1 → 4096 in steps of 2√2).
+    inner : int
+        w-step / x-step rounds per β (default 3).
+    cg : int
+        Conjugate-gradient iterations per x-step where margins are unobserved, at most
+        (default 3).
+    cg_tol : float
+        A masked x-step's conjugate gradients stop once the residual of its system is below
+        ``cg_tol`` times its right-hand side (2-norms; default 1e-4, just above the float32
+        floor of these products: ``docs/decisions.md``); 0: always ``cg`` iterations.
+    init_reg : float
+        Smoothness weight of the start, relative to AᵀA's largest diagonal (default 1e-2).
+    misfit_weights : float or None
+        Without a ``noise_model``: where the nearly unregularised fit's r.m.s. misfit exceeds
+        this many times the noise (the model does not fit the data), weigh each view-sample
+        position by its local misfit (module docstring; default 1.1, ``docs/decisions.md``);
+        None: one global weight always.
+    misfit_pool : int
+        Odd side (view-sample positions) of the box over which that local misfit is averaged
+        (default 3), so that the weights do not vary from one view sample to the next.
+    """
+
+    prior: Prior = HyperLaplacian(isotropic=True)
+    lam: float | None = None
+    lam_scale: float = 0.3
+    noise: float | None = None
+    noise_model: PoissonGaussian | None = None
+    continuation: Continuation = Continuation(beta_max=4096.0)
+    inner: int = 3
+    cg: int = 3
+    cg_tol: float = 1e-4
+    init_reg: float = 1e-2
+    misfit_weights: float | None = 1.1
+    misfit_pool: int = 3
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.prior, Prior):
+            raise TypeError(f"prior must have a transform and prox(z, weight), got "
+                            f"{type(self.prior).__name__}")
+        if self.lam is not None and not (self.lam > 0 and math.isfinite(self.lam)):
+            raise ValueError(f"lam must be positive and finite, got {self.lam!r}")
+        for name in ("lam_scale", "init_reg"):
+            value = getattr(self, name)
+            if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
+                raise ValueError(f"{name} must be > 0, got {value!r}")
+        mw = self.misfit_weights
+        if mw is not None and (isinstance(mw, bool) or not (
+                isinstance(mw, int | float) and math.isfinite(mw) and mw > 0)):
+            raise ValueError(f"misfit_weights must be a positive number or None, got {mw!r}")
+        mp = self.misfit_pool
+        if isinstance(mp, bool) or not (isinstance(mp, int) and mp >= 1 and mp % 2 == 1):
+            raise ValueError(f"misfit_pool must be an odd positive integer, got {mp!r}")
+        if not (isinstance(self.cg_tol, int | float) and 0 <= self.cg_tol < 1):
+            raise ValueError(f"cg_tol must be in [0, 1), got {self.cg_tol!r}")
+        if self.noise is not None and not (self.noise >= 0 and math.isfinite(self.noise)):
+            raise ValueError(f"noise must be a non-negative number, got {self.noise!r}")
+        if self.noise_model is not None and not isinstance(self.noise_model, PoissonGaussian):
+            raise TypeError(f"noise_model must be a PoissonGaussian, got "
+                            f"{type(self.noise_model).__name__}")
+        if not isinstance(self.continuation, Continuation):
+            raise TypeError("continuation must be a Continuation")
+        for name in ("inner", "cg"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < (
+                    1 if name == "inner" else 0):
+                raise ValueError(f"{name} must be an integer >= {1 if name == 'inner' else 0}, "
+                                 f"got {value!r}")
+
+    @property
+    def steps(self) -> int:
+        """Progress ticks (one per β) a solve makes."""
+        return len(self.continuation.betas())
