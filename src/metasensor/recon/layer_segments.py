@@ -28,6 +28,8 @@ and random walker).
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 
 __all__ = ["segment_layers", "segment_votes", "pool_to_views"]
@@ -115,7 +117,9 @@ def segment_layers(disparity, confidence, valid, guide, use, threshold: float, s
         return None
     labels = seeds == 2
     if (seeds == 0).any():  # the walker labels what no clear vote seeded
-        labels = random_walker(_normalised(guide), seeds, beta=BETA, mode="cg_j") == 2
+        with warnings.catch_warnings():  # its probabilities' round-off beyond [0, 1]
+            warnings.filterwarnings("ignore", "The probability range", UserWarning)
+            labels = random_walker(_normalised(guide), seeds, beta=BETA, mode="cg_j") == 2
     inside = labels[use]
     if inside.size < 16:
         return None
