@@ -26,6 +26,7 @@ import torch  # noqa: E402
 
 from metasensor.depth.learned import WEIGHTS, EdgeEnsemble, save_refiner  # noqa: E402
 from metasensor.depth.refiner_training import (  # noqa: E402
+    TRAINED_ON,
     render_spec,
     samples,
     scene_record,
@@ -43,7 +44,7 @@ def collect(scenes: int, seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]
     t0 = time.perf_counter()
     for i, spec in enumerate(training_specs(scenes, seed)):
         sv = render_spec(spec)
-        got = samples(scene_record(sv), sv.disparity)
+        got = samples(scene_record(sv, TRAINED_ON), sv.disparity)
         if got is not None:
             feats.append(got[0])
             labels.append(got[1])

@@ -10,8 +10,8 @@ band-limited random noise of random grain, by textured dead leaves
 (:func:`metasensor.priors.deadleaves.dead_leaves`: natural-image statistics without a
 photograph) or by flat paint; plus the benchmark's own kinds at other seeds
 and sizes (``TRAINING_KINDS``; the benchmark's evaluation scenes are seed 1 at 192 px and are
-never used). Each scene is run through :func:`metasensor.estimate_depth` with its default
-settings but the refiner itself, and every two-layer edge pixel of the result whose coverage
+never used). Each scene is run through :func:`metasensor.estimate_depth` with the settings of
+:data:`TRAINED_ON` (otherwise its defaults) but the refiner itself, and every two-layer edge pixel of the result whose coverage
 the views measure gives a sample: its evidence
 (:func:`metasensor.depth.edgefeatures.edge_samples`), whether the front's value is nearer the
 truth than the background's, and as its weight what the wrong choice adds to the squared
@@ -36,7 +36,7 @@ from metasensor.depth.scenes import _render_grid, benchmark_scene
 from metasensor.depth.synthetic import Layer, SyntheticViews, random_texture, render_views
 from metasensor.priors.deadleaves import dead_leaves
 
-__all__ = ["TRAINING_KINDS", "scene_record", "samples", "train", "training_scene",
+__all__ = ["TRAINED_ON", "TRAINING_KINDS", "scene_record", "samples", "train", "training_scene",
            "training_specs", "validate"]
 
 TRAINING_KINDS = ("occluders", "thin", "mixed")
@@ -129,11 +129,18 @@ def render_spec(spec) -> SyntheticViews:
     return benchmark_scene(source, nnum, size, 3.0, snr, seed=s)
 
 
-def scene_record(sv: SyntheticViews):
+TRAINED_ON = {"eps": 0.01, "visibility": None}
+"""The estimator's settings under which the shipped refiner's samples were collected (its
+defaults when the refiner was trained: edge-aware aggregation for every view, no visibility
+re-decision); the training script collects with them, so it reproduces the shipped weights."""
+
+
+def scene_record(sv: SyntheticViews, estimator: dict | None = None):
     """Run the estimator (default settings but the learned refiner and the speckle removal
-    after it, every view) on ``sv``:
-    ``(views (N, H, W) as the estimator normalises them, au, av, disparity, confidence)`` as
-    tensors / arrays, what the refiner sees."""
+    after it, every view; ``estimator``: keyword settings of
+    :func:`metasensor.estimate_depth` that replace its defaults, e.g. :data:`TRAINED_ON`) on
+    ``sv``: ``(views (N, H, W) as the estimator normalises them, au, av, disparity,
+    confidence)`` as tensors / arrays, what the refiner sees."""
     import warnings
 
     from metasensor.depth.estimate import _prepared_stack, estimate_depth
@@ -142,7 +149,7 @@ def scene_record(sv: SyntheticViews):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         res = estimate_depth(sv.views, sv.config, view_mask=np.ones((n, n), bool), refiner=None,
-                             speckles=None)
+                             speckles=None, **(estimator or {}))
     uu, vv = np.divmod(np.arange(n * n), n)
     stack = _prepared_stack(sv.views, uu, vv, None, True, torch.device("cpu"))
     stack -= stack.mean()
