@@ -40,6 +40,8 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
+from metasensor.depth.filters import sample_at
+
 __all__ = ["EdgeSnap", "edge_coverage", "snap_edges"]
 
 # tangent directions (dy, dx) of the four edge orientations; the edge normal is perpendicular
@@ -84,13 +86,7 @@ class EdgeSnap:
 def _sample(img: torch.Tensor, y: torch.Tensor, x: torch.Tensor) -> torch.Tensor:
     """Cubic-convolution samples (a = −0.75, torch's bicubic) of ``img (H, W)`` at the points
     ``(y, x)`` (any equal shapes), edges replicated."""
-    h, w = img.shape
-    gx = 2 * x / max(w - 1, 1) - 1
-    gy = 2 * y / max(h - 1, 1) - 1
-    grid = torch.stack([gx.reshape(-1), gy.reshape(-1)], dim=-1)[None, None]
-    out = F.grid_sample(img[None, None], grid, mode="bicubic", padding_mode="border",
-                        align_corners=True)
-    return out.reshape(y.shape)
+    return sample_at(img, y, x, mode="bicubic")
 
 
 def _slopes(views, au, av, ys, xs, lo, hi, normal, tangent, margin, nearest, farthest):

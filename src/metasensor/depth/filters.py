@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import torch
 
-__all__ = ["box_mean", "GuidedFilter"]
+__all__ = ["box_mean", "GuidedFilter", "sample_at"]
 
 
 def _box_sum_axis(x: torch.Tensor, r: int, dim: int) -> torch.Tensor:
@@ -79,3 +79,16 @@ class GuidedFilter:
         den = self(weight)
         return num / torch.clamp(den, min=floor)
 
+
+def sample_at(img: torch.Tensor, y: torch.Tensor, x: torch.Tensor,
+              mode: str = "bilinear") -> torch.Tensor:
+    """Samples of ``img (H, W)`` at the points ``(y, x)`` [px] (any equal shapes), edges
+    replicated: torch's ``grid_sample`` with ``align_corners=True`` (``mode`` "bilinear" or
+    "bicubic", the latter cubic convolution with a = −0.75)."""
+    h, w = img.shape
+    gx = 2 * x / max(w - 1, 1) - 1
+    gy = 2 * y / max(h - 1, 1) - 1
+    grid = torch.stack([gx.reshape(-1), gy.reshape(-1)], dim=-1)[None, None]
+    out = torch.nn.functional.grid_sample(img[None, None], grid, mode=mode,
+                                          padding_mode="border", align_corners=True)
+    return out.reshape(y.shape)

@@ -34,7 +34,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from metasensor.depth.filters import box_mean
+from metasensor.depth.filters import box_mean, sample_at
 
 __all__ = ["Visibility", "reveal_background"]
 
@@ -96,13 +96,6 @@ def _nearest_seen(disp: torch.Tensor, a_u: float, a_v: float, ys, xs) -> torch.T
     return z.reshape(h, w)
 
 
-def _bilinear(img: torch.Tensor, y: torch.Tensor, x: torch.Tensor) -> torch.Tensor:
-    h, w = img.shape
-    grid = torch.stack([2 * x / max(w - 1, 1) - 1, 2 * y / max(h - 1, 1) - 1], dim=-1)
-    return F.grid_sample(img[None, None], grid[None], mode="bilinear", padding_mode="border",
-                         align_corners=True)[0, 0]
-
-
 def _costs(views, au, av, centre: int, disp, back, tol: float):
     """Anchored costs of the own (``disp``) and the background (``back``) hypotheses over the
     views that see ``(p, back)``, and how many views those are."""
@@ -123,8 +116,8 @@ def _costs(views, au, av, centre: int, disp, back, tol: float):
             iy = torch.clamp(torch.round(by).long(), 0, h - 1)
             ix = torch.clamp(torch.round(bx).long(), 0, w - 1)
             vis = (z[iy, ix] >= back - tol).to(disp.dtype)
-        bg += vis * (_bilinear(views[i], by, bx) - ref) ** 2
-        own += vis * (_bilinear(views[i], ys + disp * a_u, xs + disp * a_v) - ref) ** 2
+        bg += vis * (sample_at(views[i], by, bx) - ref) ** 2
+        own += vis * (sample_at(views[i], ys + disp * a_u, xs + disp * a_v) - ref) ** 2
         seen += vis
     n = torch.clamp(seen, min=1.0)
     return own / n, bg / n, seen
