@@ -157,7 +157,9 @@ def _run() -> None:
         first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         _fail(first, 1)
     signum = received(since)
-    if code == 130 and signum is not None:  # the shell's convention: 128 + the signal
+    # the shell's convention: 128 + the signal; also when something swallowed the signal
+    # and the command ran on (every commit after it was refused, see io.interrupt.check)
+    if code in (0, 130) and signum is not None:
         name = "SIGTERM" if signum == signal.SIGTERM else "Ctrl-C (SIGINT)"
         _fail(f"stopped by {name}; unfinished outputs were removed", 128 + signum)
     from metasensor.config import say_fallbacks

@@ -152,3 +152,24 @@ def test_ctrl_c_while_the_command_loads_is_one_line(monkeypatch, capsys):
     assert stop.value.code == 130
     err = capsys.readouterr().err
     assert err.startswith("error: stopped by Ctrl-C") and err.count("\n") == 1, err
+
+
+def test_a_signal_swallowed_before_a_write_began_stops_it_inside_a_command(tmp_path):
+    """Inside a command, a SIGTERM that something swallowed before the output's write began
+    (a finaliser, the import system's lock callback) still stops that write; outside the
+    command a later write goes ahead."""
+    from metasensor.io.atomic import atomic_path
+    from metasensor.io.interrupt import Terminated, handle_termination
+
+    with handle_termination():
+        try:
+            os.kill(os.getpid(), signal.SIGTERM)
+            time.sleep(1)
+        except Terminated:
+            pass  # swallowed
+        with pytest.raises(Terminated), atomic_path(tmp_path / "a.txt") as tmp:
+            tmp.write_text("a")
+    assert not (tmp_path / "a.txt").exists() and _hidden(tmp_path) == []
+    with atomic_path(tmp_path / "b.txt") as tmp:
+        tmp.write_text("b")
+    assert (tmp_path / "b.txt").read_text() == "b"

@@ -15,7 +15,10 @@ Three measures, hand-written (no library covers them):
   interrupt the caller caught before the write began does not stop later writes).
 - Commands (:func:`handle_termination`) treat SIGTERM like Ctrl-C: :class:`Terminated`, a
   ``KeyboardInterrupt``, so the same cleanup paths remove every temporary. A signal the process
-  inherited as ignored (a background job of a script, ``nohup``) stays ignored.
+  inherited as ignored (a background job of a script, ``nohup``) stays ignored. Inside a
+  command, a stop signal taken at any time since the command began stops every later commit,
+  even one whose write began after a finaliser swallowed the signal (a signal landing in the
+  import system's lock callback is printed as "Exception ignored" and lost otherwise).
 """
 
 from __future__ import annotations
@@ -30,6 +33,7 @@ __all__ = ["Terminated", "watch", "handle_termination", "check", "taken", "recei
 
 _STOP = (signal.SIGINT, signal.SIGTERM)
 _received: list[int] = []  # every stop signal taken, in order
+_command_since: list[int] = []  # the count when each enclosing command began
 
 
 class Terminated(KeyboardInterrupt):
@@ -72,6 +76,7 @@ def handle_termination() -> Iterator[None]:
         yield
         return
     old = {sig: signal.getsignal(sig) for sig in _STOP}
+    _command_since.append(len(_received))
     for sig in _STOP:
         if old[sig] is not signal.SIG_IGN:
             signal.signal(sig, _on_signal)
@@ -80,6 +85,7 @@ def handle_termination() -> Iterator[None]:
     finally:
         for sig, handler in old.items():
             signal.signal(sig, handler)
+        _command_since.pop()
 
 
 def taken() -> int:
@@ -94,7 +100,10 @@ def received(since: int = 0) -> int | None:
 
 def check(since: int) -> None:
     """Raise again a stop signal taken after :func:`watch` returned ``since`` (called before
-    an output is put in place)."""
+    an output is put in place); inside :func:`handle_termination`, any taken since the command
+    began."""
+    if _command_since:
+        since = min(since, _command_since[0])
     if len(_received) > since:
         if _received[since] == signal.SIGTERM:
             raise Terminated("terminated by SIGTERM")
