@@ -155,3 +155,21 @@ def test_unresolved_content_gives_no_evidence_next_to_resolved_content():
     assert np.mean(ungated[:, :, 11:] != 1.0) > 0.1  # without the gate the spikes are tested
     for level in (0.0, 0.1, 1000.37):
         assert np.all(resolved_fraction(np.full((60, 60), level), 3) == 0.0)
+
+
+def test_turbulence_mode_leaves_torchs_thread_setting_alone(monkeypatch):
+    """The views' worker threads each run on one torch thread of their own: the process-wide
+    ``torch.set_num_threads`` (which other callers' threads see change) is never called."""
+    import torch
+
+    motion, _ = smooth_random_motion((200, 200), len(ORDER), 1.0, 25.0, seed=3)
+    view, truth = _small_view(motion)
+
+    def refuse(n):
+        raise AssertionError(f"torch.set_num_threads({n}) changes every thread's setting")
+
+    with monkeypatch.context() as m:
+        m.setattr(torch, "set_num_threads", refuse)
+        out = correct_motion_views(view[None, None], ORDER, mode="turbulence", progress=False,
+                                   workers=2)[0, 0]
+    assert psnr(out, truth, INNER) - psnr(view, truth, INNER) >= 8.0  # corrected as before

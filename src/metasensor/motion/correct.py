@@ -30,7 +30,6 @@ from metasensor.motion.evidence import sample_evidence
 from metasensor.motion.fallback import FallbackMap, FallbackOptions, blend, fallback_map
 from metasensor.motion.flow import (
     FLOW_METHODS,
-    _few_threads,
     motion_confidence,
     occlusions,
     phase_flows,
@@ -312,14 +311,16 @@ def correct_motion_views(views: np.ndarray, scan_order: Sequence, reference: int
     elif mode == "turbulence":
         from concurrent.futures import ThreadPoolExecutor
 
-        def one(i):
-            m = estimate_motion(flat[i], order, ref, method="registration", threshold=threshold,
-                                smooth=smooth)
-            flat[i] = MotionPlan(m, p, scatter=scatter).apply(flat[i])
+        from metasensor.backend import one_thread_here
 
-        # views in parallel threads (torch, OpenCV and the sparse products release the GIL);
-        # one torch thread each, set once here so the threads never race on the setting
-        with _few_threads(None), ThreadPoolExecutor(max(1, workers)) as pool:
+        def one(i):
+            with one_thread_here():  # this worker thread's own count; others keep theirs
+                m = estimate_motion(flat[i], order, ref, method="registration",
+                                    threshold=threshold, smooth=smooth)
+                flat[i] = MotionPlan(m, p, scatter=scatter).apply(flat[i])
+
+        # views in parallel threads (torch, OpenCV and the sparse products release the GIL)
+        with ThreadPoolExecutor(max(1, workers)) as pool:
             for _ in tqdm(pool.map(one, live), total=len(live), desc="motion: views",
                           unit="view", disable=not progress):
                 pass

@@ -16,8 +16,6 @@ or, for turbulence, the smooth non-rigid registration of :mod:`metasensor.align.
 
 from __future__ import annotations
 
-import contextlib
-
 import numpy as np
 from scipy import ndimage
 
@@ -123,25 +121,6 @@ def occlusions(view: np.ndarray, order: list[tuple[int, int]], reference: int,
     return occ
 
 
-@contextlib.contextmanager
-def _few_threads(device):
-    """One torch thread for the small CPU problems of sub-images (thread start-up outweighs
-    their work); restores the setting afterwards."""
-    import torch
-
-    from metasensor.backend import resolve_device
-
-    if resolve_device(device).type != "cpu":
-        yield
-        return
-    old = torch.get_num_threads()
-    torch.set_num_threads(1)
-    try:
-        yield
-    finally:
-        torch.set_num_threads(old)
-
-
 def registration_grid(shape: tuple[int, int], grid: tuple[int, int] = (6, 6),
                       spacing: float = MIN_CONTROL_SPACING) -> tuple[int, int]:
     """Control points per sub-image side: at most ``grid``, and no denser than one per
@@ -159,6 +138,7 @@ def registration_flows(view: np.ndarray, order: list[tuple[int, int]], reference
     :func:`metasensor.align.nonrigid.register_nonrigid_batch`) of the reference sub-image
     onto every other sub-image. Same output as :func:`phase_flows`."""
     from metasensor.align.nonrigid import register_nonrigid_batch
+    from metasensor.backend import one_thread_here
 
     p = int(round(len(order) ** 0.5))
     subs = sub_images(np.asarray(view, np.float32), order)
@@ -170,7 +150,7 @@ def registration_flows(view: np.ndarray, order: list[tuple[int, int]], reference
         init[i, 0] = (order[t][0] - r0) / p
         init[i, 1] = (order[t][1] - c0) / p
     # S_ref(y + g) ≈ S_k(y): g lives on the grid of S_k, as phase_flows' flow does
-    with _few_threads(device):
+    with one_thread_here(device):  # small sub-image problems: thread start-up outweighs them
         g = register_nonrigid_batch(np.repeat(subs[reference][None], len(others), 0),
                                     np.stack([subs[t] for t in others]), grid=grid,
                                     iterations=iterations, lr=0.05, levels=2, init=init,
