@@ -98,6 +98,29 @@ def test_compiled_gather_equals_numpy(dtype=np.uint16):
             unrealign(views, cfg, order, moving, frames.shape[1:], engine="numpy"))
 
 
+def test_compiled_gather_keeps_torch_threads():
+    """A process limited to one torch thread stays so after the compiled kernels: numba's
+    OpenMP layer, started in a process whose torch threads were already set up, set OpenMP's
+    count to every core, which torch then read as its own."""
+    pytest.importorskip("numba")
+    import subprocess
+    import sys
+
+    code = ("import torch; torch.set_num_threads(1); torch.get_num_threads()\n"  # torch first
+            "import numpy as np\n"
+            "from metasensor.sensor.gather import gather_views, scatter_views\n"
+            "n, p, ly, lx = 15, 5, 8, 8\n"
+            "f = np.zeros((p * p, ly * n, lx * n), np.float32)\n"
+            "v = np.empty((n, n, ly * p, lx * p), np.float32)\n"
+            "o, z = [(r, c) for r in range(p) for c in range(p)], [(0, 0)] * p * p\n"
+            "gather_views(f, v, o, z, n, p, ly, lx, engine='numba')\n"
+            "scatter_views(v, f, o, z, n, p, ly, lx, engine='numba')\n"
+            "print(torch.get_num_threads())\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True, timeout=120)
+    assert out.stdout.split()[-1] == "1", out.stdout + out.stderr
+
+
 def test_realign_sequence_sliding_window():
     cfg = SystemConfig(nnum=9, scan=3)
     order = scan_order(3, "serpentine")

@@ -6,7 +6,12 @@ strided assignment does this one phase at a time and streams the whole output ``
 strided writes; the compiled kernel below instead builds every output row in one pass from the
 ``p`` source rows it needs (which stay in cache) and writes it contiguously, threads over rows.
 No library offers this gather; numba (a dependency of aotools) compiles it. Without numba the
-NumPy path is used.
+NumPy path is used. The kernel runs on at most torch's intra-op thread count
+(``torch.get_num_threads()``), and torch's count is set back after it: numba's OpenMP threading
+layer, when it starts (on the first call of a process that loads the kernel from numba's
+cache), sets OpenMP's thread count to every core, which torch then reads as its own, so that a
+process limited to one thread (``OMP_NUM_THREADS=1`` or ``torch.set_num_threads(1)``) went on
+computing on all cores after its first realign.
 """
 
 from __future__ import annotations
@@ -48,6 +53,18 @@ except ImportError:  # pragma: no cover - environment dependent
 _NUMBA_MIN_SIZE = 1 << 22
 _NUMBA_DTYPES = {np.dtype(t) for t in ("uint8", "uint16", "uint32", "int16", "int32",
                                        "float32", "float64")}
+
+
+def _run_compiled(*args) -> None:
+    """``_copy_numba(*args)`` on at most torch's intra-op threads, torch's count restored."""
+    import torch
+
+    threads = torch.get_num_threads()
+    try:
+        numba.set_num_threads(max(1, min(threads, numba.config.NUMBA_NUM_THREADS)))
+        _copy_numba(*args)
+    finally:
+        torch.set_num_threads(threads)
 
 
 def have_numba() -> bool:
@@ -93,7 +110,8 @@ def scatter_views(views: np.ndarray, frames: np.ndarray, order: list[tuple[int, 
             block = views[:, :, r::p, c::p].transpose(2, 0, 3, 1).reshape(ly * n, lx * n)
             frames[t, oy:oy + ly * n, ox:ox + lx * n] = block
         return frames
-    _copy_numba(frames, np.ascontiguousarray(views), *_tables(order, offsets, p), p, ly, lx, True)
+    _run_compiled(frames, np.ascontiguousarray(views), *_tables(order, offsets, p), p, ly, lx,
+                  True)
     return frames
 
 
@@ -106,7 +124,7 @@ def gather_views(frames, out: np.ndarray, order: list[tuple[int, int]],
     if not _use_numba(engine, frames, out):
         _gather_numpy(frames, out, order, offsets, n, p, ly, lx)
         return out
-    _copy_numba(frames, out, *_tables(order, offsets, p), p, ly, lx, False)
+    _run_compiled(frames, out, *_tables(order, offsets, p), p, ly, lx, False)
     return out
 
 
