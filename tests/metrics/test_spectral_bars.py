@@ -1,5 +1,6 @@
 """Spectral fidelity / resolved frequency and bar-group resolution against analytic cases."""
 
+import itertools
 import math
 
 import numpy as np
@@ -104,3 +105,34 @@ def test_phase_reversed_group_is_not_resolved():
     r = bar_contrast(reversed_, g)
     assert r.contrast < -0.05 and not r.resolved
     assert bar_contrast(chart, g).resolved
+
+
+def _centre(g, size):
+    return (g.y0 + g.extent / 2 - size / 2, g.x0 + g.extent / 2 - size / 2)
+
+
+def test_field_layout_is_symmetric_about_the_axis_with_coarse_groups_inward():
+    size = 384
+    groups = bar_groups(size, layout="field")
+    assert len(groups) >= len(bar_groups(size))  # at least the rows layout's groups
+    for a, b in itertools.combinations(groups, 2):  # no two groups overlap
+        assert (a.y0 + a.extent <= b.y0 or b.y0 + b.extent <= a.y0
+                or a.x0 + a.extent <= b.x0 or b.x0 + b.extent <= a.x0)
+    by_loc = {}
+    for g in groups:
+        by_loc.setdefault(g.location, {})[(g.period, g.vertical)] = _centre(g, size)
+    top, left = by_loc["top"], by_loc["left"]
+    for (p, v), (y, x) in top.items():  # left = top transposed (bars turned), others mirrored
+        assert left[(p, not v)] == pytest.approx((x, y))
+        assert by_loc["bottom"][(p, v)] == pytest.approx((-y, x))
+        assert by_loc["right"][(p, not v)] == pytest.approx((x, -y))
+    for (p, v), (y, x) in by_loc["top-left"].items():
+        assert by_loc["bottom-right"][(p, v)] == pytest.approx((-y, -x))
+    for loc in ("top", "top-left"):
+        r = {k: math.hypot(*c) for k, c in by_loc[loc].items()}
+        coarse, fine = max(r)[0], min(r)[0]
+        assert max(r[(coarse, v)] for v in (True, False)) < min(r[(fine, v)] for v in (True, False))
+    res = bar_resolution(bar_chart(size, layout="field"), groups)
+    assert all(loc["period_px"] == 2.0 for loc in res.values())
+    with pytest.raises(ValueError, match="layout"):
+        bar_groups(size, layout="diagonal")

@@ -24,7 +24,7 @@ def test_bar_rows_fringe_and_resolved_frequency():
                "meta-imaging sensor (5x5 scan)": (gaussian_filter(truth, 0.7), truth)}
     table = [{"sensor": k} for k in results]
     places = {k: (0, (truth.shape, (3, 3), 3)) for k in results}
-    rows = measure(table, results, places, 256, bars=True)
+    rows = measure(table, results, places, 256, bars="rows")
     assert {r["location"] for r in rows} >= {"centre", "top-left", "bottom-right"}
     centre = next(r for r in rows if r["location"] == "centre")
     assert centre["meta-imaging sensor (5x5 scan)"] < 5 and (
@@ -35,7 +35,7 @@ def test_bar_rows_fringe_and_resolved_frequency():
     lines = bar_lines(rows)
     assert lines[0].startswith("finest resolved bar group") and len(lines) == len(rows) + 1
     assert any("centre" in ln and "x" in ln for ln in lines)
-    assert measure([{"sensor": "2D sensor"}], results, places, 256, bars=False) == []
+    assert measure([{"sensor": "2D sensor"}], results, places, 256, bars=None) == []
 
 
 @pytest.fixture

@@ -1,7 +1,8 @@
 """The end-to-end demo (``metasensor demo`` / ``make demo``).
 
 Simulate the built-in bar-group chart (three-bar groups of 2–24 px periods at the centre, the
-edge midpoints and the corners, :mod:`metasensor.simulation.bars`; or the ISO 12233-style chart)
+edge midpoints and the corners, laid out about the field centre: scene ``"bars-field"``,
+:mod:`metasensor.simulation.bars`; or the ISO 12233-style chart)
 through one cheap single lens with strong, field-dependent aberrations
 (:class:`metasensor.simulation.lens.SingleLens`); capture it with three sensors of the same pixel
 pitch and photon budget — a conventional 2D sensor (in focus), a plain light-field camera
@@ -34,6 +35,9 @@ from metasensor.simulation.capture import OPERATING_FOCUS_OFFSET
 
 __all__ = ["DemoSettings", "run_demo", "sensor_field_zernike", "demo_warnings"]
 
+#: The bar charts the demo takes and their layouts (:func:`metasensor.simulation.bars.bar_groups`)
+BAR_LAYOUTS = {"bars-field": "field", "bars": "rows"}
+
 # below these the demo runs but cannot be judged: the chart's finest bar groups and the star's
 # centre are finer than a small field resolves, and small blocks are narrower than the PSF
 # windows of the aberrated field
@@ -60,9 +64,10 @@ class DemoSettings:
     field_px: int = 6004
     blocks: tuple[int, int] = (4, 4)
     field_blocks: tuple[int, int] = (6, 6)
-    # the chart: "bars" (bar groups at nine places) or "chart" (ISO 12233-style: slanted-edge
-    # squares, a Siemens star, for the slanted-edge MTF)
-    scene: str = "bars"
+    # the chart: "bars-field" (bar groups at nine places, oriented about the field centre),
+    # "bars" (the same groups in rows from each box's corner) or "chart" (ISO 12233-style:
+    # slanted-edge squares, a Siemens star, for the slanted-edge MTF)
+    scene: str = "bars-field"
     # defocus of both light-field cameras [waves r.m.s., Noll Z4] (the 2D sensor stays in focus)
     focus_offset: float = OPERATING_FOCUS_OFFSET
     # the meta-imaging reconstruction's space-variant model (ReconOptions.space_variant)
@@ -195,8 +200,9 @@ def _check_settings(s: DemoSettings) -> None:
     SystemConfig(scan=s.scan)  # an impossible scan period fails here
     if not math.isfinite(s.snr_db):
         raise ValueError(f"snr_db must be a finite number of dB, got {s.snr_db!r}")
-    if s.scene not in ("bars", "chart"):
-        raise ValueError(f"the demo's chart (scene) must be 'bars' or 'chart', got {s.scene!r}")
+    if s.scene not in BAR_LAYOUTS and s.scene != "chart":
+        raise ValueError(f"the demo's chart (scene) must be 'bars-field', 'bars' or 'chart', got "
+                         f"{s.scene!r}")
     if not math.isfinite(s.focus_offset):
         raise ValueError(f"focus_offset must be a finite number of waves, got {s.focus_offset!r}")
     if min(s.blocks) < 1 or min(s.field_blocks) < 1:
@@ -289,7 +295,7 @@ def _demo_steps(out: Path, s: DemoSettings, notes: list[str], steps, t_start: fl
     places = {k: (cap.offset, (cap.truth.shape, s.blocks, d)) for k in (*results, *restored)}
     places["plain light field (1x1 scan)"] = (lf.offset, (lf.truth.shape, s.blocks,
                                                           lf.config.scan_step_px))
-    bars = measure(table, {**results, **restored}, places, s.size, s.scene == "bars")
+    bars = measure(table, {**results, **restored}, places, s.size, BAR_LAYOUTS.get(s.scene))
     figs = _figures(out, cap, lf, results, s.size // 5)
     figs["comparison"] = comparison_figure(out / "comparison.png", cap, lf, results)
     seconds = time.perf_counter() - t_start

@@ -40,7 +40,7 @@ def restore_2d(cap, zernike) -> np.ndarray:
     return best[1]
 
 
-def measure(table: list[dict], results: dict, places: dict, size: int, bars: bool
+def measure(table: list[dict], results: dict, places: dict, size: int, bars: str | None
             ) -> list[dict]:
     """Add ``resolved_cpp`` and ``fringe_ratio`` to every row of ``table`` (by its ``sensor``)
     and return the bar-group rows: per location the finest resolved period [px] of each image
@@ -48,7 +48,8 @@ def measure(table: list[dict], results: dict, places: dict, size: int, bars: boo
     period to the meta-imaging sensor's (a lower bound where the 2D sensor resolves none).
 
     ``results``: name -> (image, truth); ``places``: name -> (scene pixel of the truth's
-    pixel 0, (truth shape, block grid, scan step) of the block borders)."""
+    pixel 0, (truth shape, block grid, scan step) of the block borders); ``bars``: the bar
+    chart's layout (:func:`metasensor.simulation.bars.bar_groups`), None for another scene."""
     from metasensor.metrics.bars import bar_resolution
     from metasensor.metrics.fringes import block_borders, fringe_ratio
     from metasensor.metrics.spectral import resolved_frequency
@@ -63,7 +64,8 @@ def measure(table: list[dict], results: dict, places: dict, size: int, bars: boo
         row["resolved_cpp"] = resolved_frequency(image, truth)
         row["fringe_ratio"] = fringe_ratio(truth=truth, image=image, rows=ys, cols=xs)
         if bars:
-            readings[name] = bar_resolution(image, bar_groups(size, origin=float(origin)))
+            readings[name] = bar_resolution(image, bar_groups(size, origin=float(origin),
+                                                              layout=bars))
     if not bars:
         return []
     meta = next(k for k in readings if k.startswith("meta-imaging"))

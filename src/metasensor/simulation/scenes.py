@@ -1,6 +1,7 @@
 """Built-in scenes (no downloads): a procedural ISO 12233-style resolution chart, a checkerboard,
-points, a uniform field, a bar-group chart over the field (``"bars"``,
-:mod:`metasensor.simulation.bars`) and the natural images that ship with scikit-image.
+points, a uniform field, a bar-group chart over the field (``"bars"``, and ``"bars-field"`` with
+the groups oriented about the field centre: :mod:`metasensor.simulation.bars`) and the natural
+images that ship with scikit-image.
 
 All scenes are float32 radiance in [0, 1], shape (size, size) (or ``shape``). Edges are
 anti-aliased analytically: a pixel's value is the clipped signed distance of its centre to the
@@ -20,7 +21,7 @@ __all__ = ["resolution_chart", "checkerboard", "point_grid", "natural_image", "l
 
 NATURAL = ("camera", "astronaut", "coins", "moon", "brick", "grass", "gravel", "text",
            "page", "coffee", "chelsea", "rocket", "cat", "horse", "clock", "immunohistochemistry")
-SCENES = ("chart", "checkerboard", "points", "point", "uniform", "bars") + NATURAL
+SCENES = ("chart", "checkerboard", "points", "point", "uniform", "bars", "bars-field") + NATURAL
 
 
 def _cover(sd: np.ndarray) -> np.ndarray:
@@ -155,10 +156,10 @@ def load_scene(name: str, size: int = 512, shape=None) -> np.ndarray:
         return out
     if name == "uniform":
         return np.full(_size(size, shape), 0.5, np.float32)
-    if name == "bars":
+    if name in ("bars", "bars-field"):
         from metasensor.simulation.bars import bar_chart
 
-        return bar_chart(size, shape)
+        return bar_chart(size, shape, layout="rows" if name == "bars" else "field")
     if name in NATURAL:
         return natural_image(name, size, shape)
     path = Path(name)
