@@ -55,6 +55,15 @@ def test_corner_weights_are_a_bilinear_partition_of_unity():
     np.testing.assert_allclose(w[:, 0, :], w[:, 36 - 30 + oy - 1, :])
     with pytest.raises(ValueError, match="core"):
         corner_weights(g, (0, 0), (5, 5, 0, 3))
+    # a 3 x 3 grid of points: hats, a partition of unity; 2 x 2 of it sums to the corners'
+    w3 = corner_weights(g, (30, 60), (36, 54, 66, 84), points=3)
+    assert w3.shape == (9, *g.domain) and (w3 >= 0).all()
+    np.testing.assert_allclose(w3.sum(0), 1.0, atol=1e-6)
+    centre = 45 - 30 + oy, 75 - 60 + ox  # field pixel (45, 75): centre 0.5 px past the middle
+    assert w3[4][centre] == pytest.approx((1 - 0.5 / 9) ** 2, rel=1e-6)
+    np.testing.assert_allclose(corner_weights(g, (30, 60), (36, 54, 66, 84), points=2), w)
+    with pytest.raises(ValueError, match="points"):
+        corner_weights(g, (0, 0), (0, 9, 0, 9), points=1)
 
 
 def test_bad_banks_and_weights_are_refused():

@@ -34,6 +34,11 @@ def test_corner_zernikes_evaluate_the_field_at_the_core_corners():
     np.testing.assert_allclose(z[b.index][:, :2], [[0.5, 0.0], [0.5, 1.0], [1.5, 0.0],
                                                    [1.5, 1.0]], atol=1e-6)
     assert z[b.index].shape == (4, 45)
+    fine = corner_zernikes(blocks, shape, zernike=np.array([0.5]), field_zernike=field,
+                           points=3)[b.index]  # a 3 x 3 grid over the core, corners included
+    assert fine.shape == (9, 45)
+    np.testing.assert_allclose(fine[[0, 2, 6, 8], :2], z[b.index][:, :2], atol=1e-6)
+    np.testing.assert_allclose(fine[4, :2], [0.5 + (67.5 / 45 - 1), 1.5 - 1.0], atol=1e-6)
 
 
 def test_one_bank_at_every_corner_gives_the_plain_reconstruction(setup):
@@ -57,6 +62,11 @@ def test_one_bank_at_every_corner_gives_the_plain_reconstruction(setup):
     assert np.abs(sv - plain).mean() < 2e-3 * truth.max()
     assert np.abs(sv - plain).max() < 0.1 * truth.max()
     assert np.abs(sv - truth).mean() < 1.05 * np.abs(plain - truth).mean()
+    n_sv = len(calls)
+    fine = reconstruct(views, CFG, psf_fn=psf_fn, field_zernike=field, blocks=(2, 2),
+                       space_variant=True, field_points=3, solver_options=quick).image
+    assert len(calls) - n_sv == 36  # a 3 x 3 grid of banks per block
+    assert np.abs(fine - sv).mean() < 2e-3 * truth.max()  # one bank everywhere: same model
 
 
 def test_space_variant_refuses_what_it_cannot_model(setup):
@@ -67,3 +77,5 @@ def test_space_variant_refuses_what_it_cannot_model(setup):
         reconstruct(views, CFG, psf=bank, space_variant=True)
     with pytest.raises(TypeError, match="space_variant"):
         reconstruct(views, CFG, space_variant="yes")
+    with pytest.raises(ValueError, match="field_points"):
+        reconstruct(views, CFG, space_variant=True, field_points=1)

@@ -16,8 +16,8 @@ field points and weights agree on their shared borders see the same PSFs there. 
 renders field-dependent blur the same way (:mod:`metasensor.simulation.layers`).
 
 :func:`corner_weights` gives the bilinear weights of the four corners of a block's core (field
-points on the block grid's corners: neighbouring blocks share them), held constant beyond the
-core.
+points on the block grid's corners: neighbouring blocks share them), or of a finer grid of
+points spanning the core, held constant beyond the core.
 
 The forward sums the banks' folded spectra before one inverse transform per view; the adjoint
 shares the views' small FFTs between banks. Cost: ``F`` times one bank's (minus the shared
@@ -52,8 +52,9 @@ def pad_banks(banks) -> list[np.ndarray]:
 
 
 def corner_weights(geometry: Geometry, window_origin: tuple[int, int],
-                   core: tuple[int, int, int, int]) -> np.ndarray:
-    """Bilinear weights ``(4, Ny, Nx)`` of a block core's corners on an estimate domain.
+                   core: tuple[int, int, int, int], points: int = 2) -> np.ndarray:
+    """Bilinear weights ``(points², Ny, Nx)`` of a block core's field points on an estimate
+    domain.
 
     Parameters
     ----------
@@ -62,27 +63,35 @@ def corner_weights(geometry: Geometry, window_origin: tuple[int, int],
     window_origin : (int, int)
         Output pixel (field coordinates) of the window's pixel (0, 0).
     core : (y0, y1, x0, x1)
-        The block's core in output pixels; its corners are the field points, in the order
-        (y0, x0), (y0, x1), (y1, x0), (y1, x1) (continuous coordinates: pixel i covers
-        [i, i + 1)).
+        The block's core in output pixels (continuous coordinates: pixel i covers [i, i + 1)).
+    points : int
+        Field points per side, evenly spaced from the core's first edge to its last (2: the
+        corners), ordered row-major: (y0, x0), (y0, x1), (y1, x0), (y1, x1) for 2.
 
     Returns
     -------
     numpy.ndarray
-        float32 ``(4, Ny, Nx)``, non-negative, summing to 1 at every pixel; bilinear inside the
-        core, constant beyond it along each axis (the nearest core edge's value).
+        float32 ``(points², Ny, Nx)``, non-negative, summing to 1 at every pixel; piecewise
+        bilinear (hat functions of the points) inside the core, constant beyond it along each
+        axis (the nearest core edge's value).
     """
     ny, nx = geometry.domain
     oy, ox = geometry.offset
     y0, y1, x0, x1 = core
     if y1 <= y0 or x1 <= x0:
         raise ValueError(f"core must be a non-empty box (y0, y1, x0, x1), got {core}")
+    if isinstance(points, bool) or int(points) != points or points < 2:
+        raise ValueError(f"points must be an integer >= 2, got {points!r}")
+    n = int(points)
     gy = window_origin[0] + np.arange(ny) - oy + 0.5  # field coordinate of each pixel centre
     gx = window_origin[1] + np.arange(nx) - ox + 0.5
-    ty = np.clip((gy - y0) / (y1 - y0), 0.0, 1.0)
-    tx = np.clip((gx - x0) / (x1 - x0), 0.0, 1.0)
-    wy, wx = (1.0 - ty, ty), (1.0 - tx, tx)
-    return np.stack([np.outer(wy[a], wx[b]) for a in (0, 1) for b in (0, 1)]).astype(np.float32)
+    ty = np.clip((gy - y0) / (y1 - y0), 0.0, 1.0) * (n - 1)
+    tx = np.clip((gx - x0) / (x1 - x0), 0.0, 1.0) * (n - 1)
+    knots = np.arange(n, dtype=np.float64)
+    wy = [np.clip(1.0 - np.abs(ty - k), 0.0, 1.0) for k in knots]
+    wx = [np.clip(1.0 - np.abs(tx - k), 0.0, 1.0) for k in knots]
+    return np.stack([np.outer(wy[a], wx[b]) for a in range(n) for b in range(n)]
+                    ).astype(np.float32)
 
 
 class SpaceVariantOperator(GridShapes):

@@ -338,7 +338,8 @@ def reconstruct(views, cfg: SystemConfig, method: str = "isa", zernike=None, fie
     if opts.space_variant:
         from metasensor.recon.space_variant import corner_zernikes
 
-        corners = corner_zernikes(block_list, shape, zernike, field_zernike)
+        corners = corner_zernikes(block_list, shape, zernike, field_zernike,
+                                  points=opts.field_points)
     return _run(views, cfg, method, grid, zern, opts, {
         "blocks": block_list, "uv": subset_major(uv, subsets), "solver": solver_opts,
         "subsets": subsets, "shape": shape, "t0": t0, "name": solver, "corners": corners,

@@ -72,7 +72,7 @@ class BlockTask:
     device: str | None = None
     windowed: bool = False
     progress: Any = None  # callable(n), local runs only
-    corner_zernike: np.ndarray | None = None  # (4, J): the space-variant model's field points
+    corner_zernike: np.ndarray | None = None  # (points², J): space-variant field points
     dao_negligible: float = 0.0
     probe_samples: int = PROBE_SAMPLES
     setup_gate: Any = None

@@ -72,6 +72,12 @@ class ReconOptions:
         the operator (:mod:`metasensor.recon.space_variant`), instead of one bank at its
         centre: PSFs continuous across blocks for aberrations that change inside a block.
         ``method="isa"`` with the HQS solver only; about 4x the solve's cost. Default False.
+    field_points : int
+        With ``space_variant``: field points per side of each block's core (>= 2; default 2,
+        its corners), on an even grid shared with the neighbouring blocks; the banks are
+        blended bilinearly between neighbouring points. Where a view's PSF moves by more than
+        its width between two points, their blend is two images of a point, not one moved
+        image; closer points blend PSFs that differ less. Cost about ``field_points²`` banks.
     depth_layers : str or DepthLayers
         ``"off"`` (default: one bank per block) or ``"auto"`` / a
         :class:`metasensor.recon.layers.DepthLayers` (its settings): a block whose views show
@@ -118,6 +124,7 @@ class ReconOptions:
     margin: int | None = None
     pad: bool = True
     space_variant: bool = False
+    field_points: int = 2
     depth_layers: Any = "off"
     dao: DaoOptions | None = None
     dao_negligible: float | None = None
@@ -157,6 +164,9 @@ class ReconOptions:
             raise TypeError("dao must be DaoOptions")
         if not isinstance(self.space_variant, bool):
             raise TypeError(f"space_variant must be True or False, got {self.space_variant!r}")
+        n = self.field_points
+        if isinstance(n, bool) or not isinstance(n, int | np.integer) or n < 2:
+            raise ValueError(f"field_points must be an integer >= 2, got {n!r}")
         resolve_depth_layers(self.depth_layers)  # refuses anything else
         g = self.dao_negligible
         if g is not None and (isinstance(g, bool) or not (

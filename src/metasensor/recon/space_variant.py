@@ -1,5 +1,6 @@
 """The space-variant model of a block (``reconstruct(space_variant=True)``): PSF banks at the
-four corners of the block's core, blended bilinearly inside the operator.
+four corners of the block's core (or a finer grid of field points spanning it,
+``ReconOptions.field_points``), blended bilinearly inside the operator.
 
 Field points on the corners of the block grid (:func:`corner_zernikes`) are shared by the blocks
 that meet there, so neighbouring blocks see the same, continuous PSFs along their common border
@@ -20,26 +21,29 @@ __all__ = ["corner_zernikes", "space_variant_operator"]
 
 
 def corner_zernikes(blocks: list[Block], shape: tuple[int, int], zernike=None,
-                    field_zernike=None, n_modes: int = 45) -> dict:
-    """Noll vectors ``(4, J)`` [waves] at each block core's corners, (y0, x0), (y0, x1),
-    (y1, x0), (y1, x1): ``zernike`` (global) plus ``field_zernike`` evaluated there
-    (normalised field coordinates ``2·y / H − 1`` of the corner, continuous coordinates).
-    Returns ``{block.index: array}``."""
+                    field_zernike=None, n_modes: int = 45, points: int = 2) -> dict:
+    """Noll vectors ``(points², J)`` [waves] at each block core's field points: a
+    ``points`` × ``points`` grid spanning the core, row-major (``points`` 2: its corners
+    (y0, x0), (y0, x1), (y1, x0), (y1, x1)); ``zernike`` (global) plus ``field_zernike``
+    evaluated there (normalised field coordinates ``2·y / H − 1`` of the point, continuous
+    coordinates). Returns ``{block.index: array}``."""
     from metasensor.optics.field import evaluate_field_zernike
 
     h, w = shape
     out = {}
+    n = int(points)
     for b in blocks:
         y0, y1, x0, x1 = b.core
-        yn = 2.0 * np.array([y0, y0, y1, y1], np.float64) / h - 1.0
-        xn = 2.0 * np.array([x0, x1, x0, x1], np.float64) / w - 1.0
-        parts = [np.zeros((4, n_modes))]
+        gy, gx = np.meshgrid(np.linspace(y0, y1, n), np.linspace(x0, x1, n), indexing="ij")
+        yn = 2.0 * gy.ravel() / h - 1.0
+        xn = 2.0 * gx.ravel() / w - 1.0
+        parts = [np.zeros((n * n, n_modes))]
         if field_zernike is not None:
             parts.append(evaluate_field_zernike(field_zernike, yn, xn))
         if zernike is not None:
             parts.append(np.broadcast_to(np.asarray(zernike, np.float64).ravel(),
-                                         (4, np.size(zernike))))
-        z = np.zeros((4, max(p.shape[-1] for p in parts)))
+                                         (n * n, np.size(zernike))))
+        z = np.zeros((n * n, max(p.shape[-1] for p in parts)))
         for p in parts:
             z[:, :p.shape[-1]] += p
         out[b.index] = z.astype(np.float32)
@@ -71,5 +75,6 @@ def space_variant_operator(task, data_win: np.ndarray, rows, cols):
     geometry = make_geometry(data_win.shape[-2:], task.cfg.scan_step_px, banks[0].shape[-1] // 2,
                              pad=task.pad)
     block = task.block
-    weights = corner_weights(geometry, (block.window[0], block.window[2]), block.core)
+    points = int(round(len(banks) ** 0.5))
+    weights = corner_weights(geometry, (block.window[0], block.window[2]), block.core, points)
     return SpaceVariantOperator(banks, weights, geometry, device=task.device), history, reg_zernike
