@@ -35,11 +35,11 @@ def register(app: typer.Typer) -> None:
         snr: float = typer.Option(30.0, "--snr", help="SNR of the captures in dB"),
         blocks: str = typer.Option("4x4", "--blocks", help="multisite blocks, e.g. 3x3"),
         seed: int = typer.Option(0, "--seed", help="random seed"),
-        chart: str = typer.Option("bars-field", "--chart",
-                                  help="bars-field (three-bar groups at the centre, edge "
-                                       "midpoints and corners, coarser groups towards the axis), "
-                                       "bars (the same groups in rows) or chart (ISO "
-                                       "12233-style: slanted edges, a Siemens star)"),
+        chart: str = typer.Option("bars", "--chart",
+                                  help="bars (three-bar groups at the centre, edge midpoints and "
+                                       "corners), bars-field (the same, coarser groups towards "
+                                       "the axis, symmetric about it) or chart (ISO 12233-style: "
+                                       "slanted edges, a Siemens star)"),
         scenario: str = typer.Option("single-lens", "--scenario",
                                      help="single-lens (default), plastic-wrap, telescope or "
                                           "gigapixel (the paper's Figs. 3, 5 and ED Fig. 7)"),

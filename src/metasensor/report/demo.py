@@ -1,8 +1,8 @@
 """The end-to-end demo (``metasensor demo`` / ``make demo``).
 
 Simulate the built-in bar-group chart (three-bar groups of 2–24 px periods at the centre, the
-edge midpoints and the corners, laid out about the field centre: scene ``"bars-field"``,
-:mod:`metasensor.simulation.bars`; or the ISO 12233-style chart)
+edge midpoints and the corners, :mod:`metasensor.simulation.bars`: scene ``"bars"``, or
+``"bars-field"`` laid out about the field centre; or the ISO 12233-style chart)
 through one cheap single lens with strong, field-dependent aberrations
 (:class:`metasensor.simulation.lens.SingleLens`); capture it with three sensors of the same pixel
 pitch and photon budget — a conventional 2D sensor (in focus), a plain light-field camera
@@ -64,10 +64,10 @@ class DemoSettings:
     field_px: int = 6004
     blocks: tuple[int, int] = (4, 4)
     field_blocks: tuple[int, int] = (6, 6)
-    # the chart: "bars-field" (bar groups at nine places, oriented about the field centre),
-    # "bars" (the same groups in rows from each box's corner) or "chart" (ISO 12233-style:
-    # slanted-edge squares, a Siemens star, for the slanted-edge MTF)
-    scene: str = "bars-field"
+    # the chart: "bars" (bar groups at nine places, in rows from each box's corner),
+    # "bars-field" (the same groups oriented about the field centre) or "chart" (ISO
+    # 12233-style: slanted-edge squares, a Siemens star, for the slanted-edge MTF)
+    scene: str = "bars"
     # defocus of both light-field cameras [waves r.m.s., Noll Z4] (the 2D sensor stays in focus)
     focus_offset: float = OPERATING_FOCUS_OFFSET
     # the meta-imaging reconstruction's space-variant model (ReconOptions.space_variant)
