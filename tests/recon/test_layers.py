@@ -116,6 +116,43 @@ def test_one_layer_is_reconstructed_exactly_as_without_the_model(half_card):
     np.testing.assert_array_equal(auto.image, off.image)
 
 
+def test_a_layer_the_data_do_not_fit_better_is_refused(half_card, monkeypatch):
+    """A block of one depth given a false second layer (the nearer card's 0.483 on half of the
+    chart, as the disparity halo along a nearer object's border reads): the two-layer fit
+    explains that half's views worse, so the block keeps its one-bank image."""
+    import metasensor.recon.layers as layers
+
+    cap, c = half_card
+    chart = np.ascontiguousarray(cap.views[:, :, :, :c // CFG.scan_step_px - 2])
+    off = reconstruct(chart, CFG, zernike=Z)
+
+    def false_split(window, cfg, zernike, region, settings, device=None, guide=None):
+        labels = np.zeros(window.shape[-2:], np.uint8)
+        labels[:, labels.shape[1] // 2:] = 1
+        return layers.LayerMap(disparity=np.array([0.0, 0.483]), labels=labels,
+                               fraction=np.array([0.5, 0.5]))
+
+    monkeypatch.setattr(layers, "find_layers", false_split)
+    auto = reconstruct(chart, CFG, zernike=Z, depth_layers="auto")
+    assert auto.depth_layers == [[()]]
+    np.testing.assert_array_equal(auto.image, off.image)
+
+
+def test_layers_fit_better_compares_each_layer():
+    from metasensor.recon.layers import layers_fit_better
+
+    labels = np.zeros((10, 10), np.uint8)
+    labels[:, 5:] = 1
+    region = (slice(1, 9), slice(1, 9))
+    one = np.ones((10, 10))
+    two = np.full((10, 10), 0.8)
+    assert layers_fit_better(labels, region, one, two)
+    two[:, 5:] = 1.3  # one layer fitted worse: refused, even with the other better
+    assert not layers_fit_better(labels, region, one, two)
+    assert layers_fit_better(labels, region, one, two, ratio=1.4)
+    assert not layers_fit_better(np.ones((10, 10)), region, one, 0.5 * one)  # one layer only
+
+
 def test_two_layers_bring_the_nearer_card_into_focus(half_card):
     from metasensor.scenarios.measure import resolved_frequency
 

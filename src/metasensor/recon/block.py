@@ -318,38 +318,62 @@ def _reconstruct(task: BlockTask, started) -> BlockResult:
         raise ValueError(f"psf bank must have shape (nnum, nnum, K, K) with nnum = {cfg.nnum}, "
                          f"got {bank.shape}")
     op, registration, reg_zernike = _operator(task, bank[rows, cols], window[rows, cols])
-    res, full = _solve(task, op, window[rows, cols], zernike, dao_history, registration,
-                       reg_zernike, estimate, started, full=True)
+    res, full, x = _solve(task, op, window[rows, cols], zernike, dao_history, registration,
+                          reg_zernike, estimate, started, full=True)
     res = replace(res, dao_fit_px=fit)
     if task.layers is None:
         return res
-    return _layered(task, window, zernike, rows, cols, res, full, dao_history, estimate)
+    return _layered(task, window, zernike, rows, cols, (res, full, x), op, dao_history, estimate)
 
 
-def _layered(task: BlockTask, window: np.ndarray, zernike, rows, cols, res: BlockResult,
-             full: np.ndarray, dao_history, estimate) -> BlockResult:
+def _layered(task: BlockTask, window: np.ndarray, zernike, rows, cols, one: tuple, one_op,
+             dao_history, estimate) -> BlockResult:
     """The depth-aware model (:mod:`metasensor.recon.layers`): where the block's views show two
-    depth layers (decided on its one-bank image ``full``, the window's pixels), the block
-    solved again with one bank per layer; else ``res`` as it is."""
+    depth layers (decided on its one-bank image, the window's pixels) and the two-layer fit
+    explains the data of each layer better than the one-bank fit (``one``: its result, image
+    and estimate on ``one_op``'s domain), the block solved with one bank per layer; else the
+    one-bank result."""
     from metasensor.recon.layer_segments import pool_to_views
-    from metasensor.recon.layers import layered_operator
+    from metasensor.recon.layers import layered_operator, layers_fit_better
 
+    res, full, one_x = one
     guide = pool_to_views(full, task.cfg.scan_step_px)
     layered = layered_operator(task, window, zernike, rows, cols, guide)
     if layered is None:
         return res
     op, found = layered
     quiet = replace(task, progress=None)  # the bar counts one solve per block
-    two = _solve(quiet, op, window[rows, cols], zernike, dao_history, [], None, estimate)
+    data = window[rows, cols]
+    two, _, two_x = _solve(quiet, op, data, zernike, dao_history, [], None, estimate, full=True)
+    ry, rx = task.block.region_in_window()
+    d = task.cfg.scan_step_px
+    region = (slice(ry.start // d, ry.stop // d), slice(rx.start // d, rx.stop // d))
+    if not layers_fit_better(found.labels, region, misfit_map(one_op, one_x, data),
+                             misfit_map(op, two_x, data), task.layers.misfit_ratio):
+        return res
     return replace(two, dao_fit_px=res.dao_fit_px,
                    layers=tuple(float(v) for v in found.disparity))
+
+
+def misfit_map(op, estimate, data_win: np.ndarray) -> np.ndarray:
+    """``(Sy, Sx)`` r.m.s. over the views of the model's misfit ``A·estimate − data`` at each of
+    the window's view samples (``data_win`` ``(V, Sy, Sx)``, ``estimate`` on ``op``'s
+    domain)."""
+    import torch
+
+    with torch.no_grad():
+        data, _ = op.geometry.embed(torch.from_numpy(np.asarray(data_win)).to(op.device))
+        sy, sx = op.geometry.sample_slices()
+        res = op.forward(estimate)[:, sy, sx] - data[:, sy, sx]
+        return torch.sqrt((res.double() ** 2).mean(0)).cpu().numpy()
 
 
 def _solve(task: BlockTask, op, data_win: np.ndarray, zernike, dao_history, registration,
            reg_zernike, estimate=None, started=None, full: bool = False):
     """Solve the block on ``op`` and cut its region out of the estimate (``estimate``: DAO's,
     applied when it is ``zernike`` itself; ``started``: called at the solver's every step);
-    ``full``: also the estimate over the whole window (a ``(BlockResult, image)`` pair)."""
+    ``full``: also the estimate over the whole window and on the operator's domain (a
+    ``(BlockResult, image, domain estimate)`` triple)."""
     import torch
 
     from metasensor.solvers import solve
@@ -369,4 +393,4 @@ def _solve(task: BlockTask, op, data_win: np.ndarray, zernike, dao_history, regi
                       zernike, result.history, dao_history, registration, reg_zernike,
                       None if estimate is None else estimate is zernike,  # applied: the same
                       estimate)
-    return (out, image) if full else out
+    return (out, image, result.estimate.detach()) if full else out

@@ -36,6 +36,13 @@ simulator renders depth the same way).
 4. :func:`layer_weights`: each layer's indicator on the view grid, repeated onto the pixel grid,
    continued by its edge values over the operator's padded domain, feathered by a Gaussian and
    normalised to a partition of unity.
+5. :func:`layers_fit_better`: the two-layer solve is kept only where its model explains the
+   views better than the one-bank solve's in each layer (the r.m.s. misfit over the views, over
+   the layer's samples in the block's region); else the block keeps its one-bank image. A
+   "layer" that is the disparity estimator's halo along a nearer object's border (the views
+   there straddle the depth edge), not a depth of the scene, is given a defocus its points do
+   not have, and its data are then fitted worse (model selection by the data misfit of the
+   fitted models).
 
 Hand-written (no library segments a light field's blocks into depth layers for a phase-space
 operator); the disparity estimator and the operator are this package's.
@@ -52,7 +59,7 @@ import numpy as np
 from metasensor.config import SystemConfig
 
 __all__ = ["DepthLayers", "LayerMap", "find_layers", "layer_zernikes", "favour_sharper",
-           "layer_weights", "resolve_depth_layers", "layered_operator"]
+           "layer_weights", "resolve_depth_layers", "layered_operator", "layers_fit_better"]
 
 
 @dataclass(frozen=True)
@@ -86,6 +93,9 @@ class DepthLayers:
         Confidence-weighted share of a segment's pixels that must read one layer's disparity
         for the segment to seed that layer (default 0.75; in (0.5, 1)); the random walker on
         the image labels the rest (:mod:`metasensor.recon.layer_segments`).
+    misfit_ratio : float
+        The two-layer solve is kept where, in each layer, its r.m.s. data misfit is at most
+        this times the one-bank solve's (default 1.0; :func:`layers_fit_better`).
     """
 
     min_separation: float = 0.25
@@ -96,9 +106,10 @@ class DepthLayers:
     edge_samples: int = 3
     segment_scale: float = 100.0
     seed_vote: float = 0.75
+    misfit_ratio: float = 1.0
 
     def __post_init__(self) -> None:
-        for name in ("min_separation", "feather_px", "segment_scale"):
+        for name in ("min_separation", "feather_px", "segment_scale", "misfit_ratio"):
             v = getattr(self, name)
             if isinstance(v, bool) or not (isinstance(v, int | float) and math.isfinite(v)
                                            and v > 0):
@@ -296,3 +307,34 @@ def layered_operator(task, window: np.ndarray, zernike, rows, cols, guide=None):
     geometry = make_geometry(window.shape[-2:], d, banks[0].shape[-1] // 2, pad=task.pad)
     weights = layer_weights(labels, geometry, task.layers.feather_px)
     return SpaceVariantOperator(banks, weights, geometry, device=task.device), found
+
+
+def layers_fit_better(labels, region: tuple[slice, slice], one, two, ratio: float = 1.0) -> bool:
+    """Whether the two-layer model fits the data better than one bank in each layer.
+
+    Parameters
+    ----------
+    labels : (h, w) array of 0/1
+        The layers on the window's view grid (:class:`LayerMap`).
+    region : (slice, slice)
+        The block's region in the window's view samples (where the fits are compared).
+    one, two : (h, w) float
+        The r.m.s. misfit over the views at each view sample of the one-bank and the
+        two-layer solves (:func:`metasensor.recon.block.misfit_map`).
+    ratio : float
+        The largest r.m.s. misfit of the two-layer fit in a layer, over the one-bank fit's.
+
+    Returns
+    -------
+    bool
+        True where each layer holds samples in the region and the two-layer fit's r.m.s.
+        misfit over them is at most ``ratio`` times the one-bank fit's.
+    """
+    lab = np.asarray(labels).astype(bool)[region]
+    one, two = np.asarray(one, np.float64)[region], np.asarray(two, np.float64)[region]
+    for inside in (~lab, lab):
+        if not inside.any():
+            return False
+        if np.sqrt(np.mean(two[inside] ** 2)) > ratio * np.sqrt(np.mean(one[inside] ** 2)):
+            return False
+    return True
