@@ -195,6 +195,10 @@ WRAP_BENCH = {"size": 480, "blocks": (4, 4), "grid": (4, 4)}
 
 
 def _scenario_rows(quick: bool, names=("plastic-wrap", "telescope", "gigapixel")) -> list[dict]:
+    """Each scenario's row (:func:`summary_row`) with the 1-minute load average and torch's
+    thread count at its end (a one-thread run that ends on more threads computed on them)."""
+    import torch
+
     from metasensor.scenarios import run_scenario
 
     settings = ({"plastic-wrap": {"size": 144, "blocks": (3, 3), "grid": (3, 3)},
@@ -203,8 +207,9 @@ def _scenario_rows(quick: bool, names=("plastic-wrap", "telescope", "gigapixel")
     rows = []
     for name in names:
         with tempfile.TemporaryDirectory() as tmp:
-            rows.append(summary_row(run_scenario(name, tmp, progress=False,
-                                                 **settings.get(name, {}))))
+            row = summary_row(run_scenario(name, tmp, progress=False, **settings.get(name, {})))
+        rows.append({**row, "load_average": os.getloadavg()[0],
+                     "torch_threads": torch.get_num_threads()})
     return rows
 
 
