@@ -18,7 +18,8 @@ depth-edge pixels' layer (``refiner=None``, ``metasensor.depth.learned``), witho
 re-decision of them (also ``edges=None``, ``metasensor.depth.edges``) and, for the default,
 without the removal of speckles (``speckles=None``, ``metasensor.depth.speckle``) and without
 the re-decision of background pixels by their visible views (``visibility=None``,
-``metasensor.depth.visibility``), and on
+``metasensor.depth.visibility``), for 5 x 5 also with a wider cost aggregation window
+(``radius=6``), and on
 photographs in front of a photograph (``scenes.natural_scene``, a family neither was tuned or
 trained on). The speed rows time the default (semi-global matching) and the window aggregation
 alone in the same run.
@@ -148,11 +149,11 @@ HARD_CASES = ((9, 40.0), (5, 30.0))  # views per side, SNR [dB]
 
 def _hard_row(sv, n: int, smoothing, label: str, edges=ms.depth.EdgeSnap(),
               refiner=ms.depth.EdgeRefiner(), speckles=ms.depth.Speckles(),
-              visibility=ms.depth.Visibility(), eps=None) -> dict:
+              visibility=ms.depth.Visibility(), eps=None, radius=None) -> dict:
     t0 = time.perf_counter()
     res = ms.estimate_depth(sv.views, sv.config, view_mask=np.ones((n, n), bool),
                             smoothing=smoothing, edges=edges, refiner=refiner,
-                            speckles=speckles, visibility=visibility, eps=eps)
+                            speckles=speckles, visibility=visibility, eps=eps, radius=radius)
     dt = time.perf_counter() - t0
     m = np.zeros(sv.disparity.shape, bool)
     m[15:-15, 15:-15] = True
@@ -192,6 +193,9 @@ def _hard_rows(size: int) -> list[dict]:
                                   edges=None, refiner=None))
             if n == 9:
                 rows.append(_hard_row(sv, n, None, name + ", window only", refiner=None))
+            else:
+                rows.append(_hard_row(sv, n, ms.depth.SemiGlobal(), name + ", radius 6",
+                                      radius=6))
     return rows
 
 
@@ -217,6 +221,9 @@ def _natural_rows(size: int, seeds=(1, 2, 3, 4)) -> list[dict]:
             rows.append(_hard_row(sv, n, ms.depth.SemiGlobal(),
                                   name + ", edge-aware cost aggregation (eps 0.01)",
                                   eps=0.01))
+            if n == 5:
+                rows.append(_hard_row(sv, n, ms.depth.SemiGlobal(), name + ", radius 6",
+                                      radius=6))
     return rows
 
 

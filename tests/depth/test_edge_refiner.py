@@ -152,3 +152,25 @@ def test_refiner_leaves_scanned_views_alone():
         plain = ms.estimate_depth(sv.views, cfg, refiner=None)
         learned = ms.estimate_depth(sv.views, cfg, refiner=EdgeRefiner())
     assert np.array_equal(plain.disparity, learned.disparity)
+
+
+def test_photo_training_scenes_use_no_evaluation_photograph():
+    """The training family's photographs (refiner_training.photo_scene) are bundled ones that
+    scenes.natural_scene, the evaluation family, never uses; a scene is a function of its seed."""
+    from metasensor.depth.refiner_training import (
+        TRAINED_ON,
+        TRAINING_PHOTOS,
+        photo_scene,
+        training_specs,
+    )
+    from metasensor.depth.scenes import PHOTOS
+
+    assert TRAINING_PHOTOS and not set(TRAINING_PHOTOS) & set(PHOTOS)
+    assert TRAINED_ON == {}  # the refiner is trained on the estimator's defaults' output
+    a = photo_scene(nnum=5, size=40, max_disparity=3.0, snr_db=30.0, seed=7)
+    b = photo_scene(nnum=5, size=40, max_disparity=3.0, snr_db=30.0, seed=7)
+    assert np.array_equal(a.views, b.views) and np.array_equal(a.disparity, b.disparity)
+    assert np.abs(a.disparity).max() <= 3.0 + 1e-6
+    assert np.ptp(a.disparity) > 1.0  # objects in front of the background
+    sources = [s[0] for s in training_specs(6)]
+    assert sorted(set(sources)) == ["occluders", "photo", "random", "thin"]

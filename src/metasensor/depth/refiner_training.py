@@ -8,7 +8,10 @@ and two to five objects in front of it, each a rotated ellipse, a rotated bar 1.
 wide or a random polygon, at random places (every sub-pixel edge position), textured by
 band-limited random noise of random grain, by textured dead leaves
 (:func:`metasensor.priors.deadleaves.dead_leaves`: natural-image statistics without a
-photograph) or by flat paint; plus the benchmark's own kinds at other seeds
+photograph) or by flat paint; photographs in front of a photograph
+(:func:`photo_scene`, as :func:`metasensor.depth.scenes.natural_scene` builds them, but with
+the bundled scikit-image photographs of ``TRAINING_PHOTOS``, none of which the evaluation
+family ``natural_scene`` uses); plus the benchmark's own kinds at other seeds
 and sizes (``TRAINING_KINDS``; the benchmark's evaluation scenes are seed 1 at 192 px and are
 never used). Each scene is run through :func:`metasensor.estimate_depth` with the settings of
 :data:`TRAINED_ON` (otherwise its defaults) but the refiner itself, and every two-layer
@@ -36,10 +39,13 @@ from metasensor.depth.scenes import _render_grid, benchmark_scene
 from metasensor.depth.synthetic import Layer, SyntheticViews, random_texture, render_views
 from metasensor.priors.deadleaves import dead_leaves
 
-__all__ = ["TRAINED_ON", "TRAINING_KINDS", "scene_record", "samples", "train", "training_scene",
-           "training_specs", "validate"]
+__all__ = ["TRAINED_ON", "TRAINING_KINDS", "TRAINING_PHOTOS", "photo_scene", "scene_record",
+           "samples", "train", "training_scene", "training_specs", "validate"]
 
 TRAINING_KINDS = ("occluders", "thin", "mixed")
+# bundled scikit-image photographs (nothing downloaded), none of them in scenes.PHOTOS
+TRAINING_PHOTOS = ("grass", "coins", "moon", "hubble_deep_field", "immunohistochemistry",
+                   "retina", "clock", "page")
 
 
 def _shape_alpha(kind: str, shape, rng, d: int) -> np.ndarray:
@@ -103,10 +109,39 @@ def training_scene(nnum: int = 9, size: int = 96, max_disparity: float = 3.0,
                         view_mask=np.ones((nnum, nnum), bool))
 
 
+def photo_scene(nnum: int = 9, size: int = 96, max_disparity: float = 3.0,
+                snr_db: float | None = 40.0, seed: int = 0) -> SyntheticViews:
+    """Photographs in front of a photograph (module docstring): a slanted background and two to
+    four objects (ellipses, bars, polygons as in :func:`training_scene`), each textured by a
+    crop of one of :data:`TRAINING_PHOTOS`, at random disparities within ``±max_disparity``
+    behind-to-front as :func:`metasensor.depth.scenes.natural_scene` draws them; arguments and
+    result as for :func:`metasensor.depth.scenes.benchmark_scene`."""
+    from metasensor.depth.scenes import _photo
+
+    cfg, d, shape = _render_grid(nnum, size, max_disparity)
+    rng = np.random.default_rng(seed)
+    names = rng.permutation(TRAINING_PHOTOS)
+    span = float(max_disparity)
+    theta = rng.uniform(0, 2 * np.pi)
+    yy, xx = np.mgrid[0:shape[0], 0:shape[1]] / max(shape) * 2 - 1
+    ramp = np.cos(theta) * xx + np.sin(theta) * yy
+    back = span * (rng.uniform(0.3, 0.8) + rng.uniform(0.0, 0.3) * ramp)
+    layers = [Layer(np.ones(shape), back * d, _photo(names[0], shape, rng,
+                                                     zoom=float(rng.uniform(1.0, 3.0))))]
+    count = int(rng.integers(2, 5))
+    for k, dv in enumerate(np.sort(rng.uniform(-1.0, 0.3, count))[::-1] * span):
+        kind = ("ellipse", "bar", "polygon")[int(rng.integers(3))]
+        tex = _photo(names[k + 1], shape, rng, zoom=float(rng.uniform(1.0, 3.0)))
+        layers.append(Layer(_shape_alpha(kind, shape, rng, d), float(dv) * d, tex))
+    return render_views(np.full(shape, 0.5), layers, cfg, snr_db=snr_db, seed=seed,
+                        view_mask=np.ones((nnum, nnum), bool))
+
+
 def training_specs(scenes: int, seed: int = 0) -> list[tuple]:
-    """``scenes`` scene specifications ``(source, nnum, size, snr_db, scene seed)``: two in
-    three random scenes (:func:`training_scene`), one in three a benchmark kind at a seed >= 2
-    and a size other than 192 px; views per side, size and SNR alternate and vary."""
+    """``scenes`` scene specifications ``(source, nnum, size, snr_db, scene seed)``: in turn a
+    random scene (:func:`training_scene`), photographs (:func:`photo_scene`) and a benchmark
+    kind at a seed >= 2 and a size other than 192 px; views per side, size and SNR alternate
+    and vary."""
     rng = np.random.default_rng(seed)
     specs = []
     for i in range(scenes):
@@ -116,6 +151,8 @@ def training_specs(scenes: int, seed: int = 0) -> list[tuple]:
         if i % 3 == 2:
             kind = TRAINING_KINDS[(i // 3) % len(TRAINING_KINDS)]
             specs.append((kind, nnum, int(rng.choice((96, 112, 128))), snr, s))
+        elif i % 3 == 1:
+            specs.append(("photo", nnum, int(rng.choice((96, 112, 128))), snr, s))
         else:
             specs.append(("random", nnum, int(rng.choice((80, 96, 112))), snr, s))
     return specs
@@ -126,13 +163,16 @@ def render_spec(spec) -> SyntheticViews:
     source, nnum, size, snr, s = spec
     if source == "random":
         return training_scene(nnum, size, 3.0, snr, s)
+    if source == "photo":
+        return photo_scene(nnum, size, 3.0, snr, s)
     return benchmark_scene(source, nnum, size, 3.0, snr, seed=s)
 
 
-TRAINED_ON = {"eps": 0.01, "visibility": None}
-"""The estimator's settings under which the shipped refiner's samples were collected (its
-defaults when the refiner was trained: edge-aware aggregation for every view, no visibility
-re-decision); the training script collects with them, so it reproduces the shipped weights."""
+TRAINED_ON: dict = {}
+"""Settings of :func:`metasensor.estimate_depth` that replace its defaults while the shipped
+refiner's samples are collected: none (it was trained on the defaults' output, the maps it
+sees at run time). Where a default changes later, its old value goes here, so that the training
+script keeps reproducing the shipped weights until they are retrained."""
 
 
 def scene_record(sv: SyntheticViews, estimator: dict | None = None):
