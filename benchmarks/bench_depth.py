@@ -153,7 +153,8 @@ def _hard_row(sv, n: int, smoothing, label: str, edges=ms.depth.EdgeSnap(),
     t0 = time.perf_counter()
     res = ms.estimate_depth(sv.views, sv.config, view_mask=np.ones((n, n), bool),
                             smoothing=smoothing, edges=edges, refiner=refiner,
-                            speckles=speckles, visibility=visibility, eps=eps, radius=radius)
+                            speckles=speckles, visibility=visibility, eps=eps,
+                            **({} if radius is None else {"radius": radius}))
     dt = time.perf_counter() - t0
     m = np.zeros(sv.disparity.shape, bool)
     m[15:-15, 15:-15] = True
