@@ -138,7 +138,7 @@ def test_a_layer_the_data_do_not_fit_better_is_refused(half_card, monkeypatch):
     np.testing.assert_array_equal(auto.image, off.image)
 
 
-def test_layers_fit_better_compares_each_layer():
+def test_layers_fit_better_compares_the_layer_defocused_most():
     from metasensor.recon.layers import layers_fit_better
 
     labels = np.zeros((10, 10), np.uint8)
@@ -146,11 +146,12 @@ def test_layers_fit_better_compares_each_layer():
     region = (slice(1, 9), slice(1, 9))
     one = np.ones((10, 10))
     two = np.full((10, 10), 0.8)
-    assert layers_fit_better(labels, region, one, two)
-    two[:, 5:] = 1.3  # one layer fitted worse: refused, even with the other better
-    assert not layers_fit_better(labels, region, one, two)
-    assert layers_fit_better(labels, region, one, two, ratio=1.4)
-    assert not layers_fit_better(np.ones((10, 10)), region, one, 0.5 * one)  # one layer only
+    assert layers_fit_better(labels, region, one, two, (0.0, 0.5))
+    two[:, 5:] = 1.3  # layer 1 (0.5 from the wavefront) fitted worse: refused
+    assert not layers_fit_better(labels, region, one, two, (0.0, 0.5))
+    assert layers_fit_better(labels, region, one, two, (0.0, 0.5), ratio=1.4)
+    assert layers_fit_better(labels, region, one, two, (-0.3, 0.1))  # layer 0 tested: 0.8
+    assert not layers_fit_better(np.zeros((10, 10)), region, one, 0.5 * one, (0.0, 0.5))
 
 
 def test_two_layers_bring_the_nearer_card_into_focus(half_card):

@@ -330,9 +330,9 @@ def _layered(task: BlockTask, window: np.ndarray, zernike, rows, cols, one: tupl
              dao_history, estimate) -> BlockResult:
     """The depth-aware model (:mod:`metasensor.recon.layers`): where the block's views show two
     depth layers (decided on its one-bank image, the window's pixels) and the two-layer fit
-    explains the data of each layer better than the one-bank fit (``one``: its result, image
-    and estimate on ``one_op``'s domain), the block solved with one bank per layer; else the
-    one-bank result."""
+    explains the data of the layer it defocuses most better than the one-bank fit (``one``:
+    its result, image and estimate on ``one_op``'s domain), the block solved with one bank per
+    layer; else the one-bank result."""
     from metasensor.recon.layer_segments import pool_to_views
     from metasensor.recon.layers import layered_operator, layers_fit_better
 
@@ -349,7 +349,8 @@ def _layered(task: BlockTask, window: np.ndarray, zernike, rows, cols, one: tupl
     d = task.cfg.scan_step_px
     region = (slice(ry.start // d, ry.stop // d), slice(rx.start // d, rx.stop // d))
     if not layers_fit_better(found.labels, region, misfit_map(one_op, one_x, data),
-                             misfit_map(op, two_x, data), task.layers.misfit_ratio):
+                             misfit_map(op, two_x, data), found.disparity,
+                             task.layers.misfit_ratio):
         return res
     return replace(two, dao_fit_px=res.dao_fit_px,
                    layers=tuple(float(v) for v in found.disparity))

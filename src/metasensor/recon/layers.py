@@ -37,12 +37,13 @@ simulator renders depth the same way).
    continued by its edge values over the operator's padded domain, feathered by a Gaussian and
    normalised to a partition of unity.
 5. :func:`layers_fit_better`: the two-layer solve is kept only where its model explains the
-   views better than the one-bank solve's in each layer (the r.m.s. misfit over the views, over
-   the layer's samples in the block's region); else the block keeps its one-bank image. A
-   "layer" that is the disparity estimator's halo along a nearer object's border (the views
-   there straddle the depth edge), not a depth of the scene, is given a defocus its points do
-   not have, and its data are then fitted worse (model selection by the data misfit of the
-   fitted models).
+   views of the layer it defocuses most (the larger disparity relative to the block's
+   wavefront) better than the one-bank solve (the r.m.s. misfit over the views, over the
+   layer's samples in the block's region); else the block keeps its one-bank image. A "layer"
+   that is the disparity estimator's halo along a nearer object's border (the views there
+   straddle the depth edge), not a depth of the scene, is given a defocus its points do not
+   have, and its data are then fitted worse (model selection by the data misfit of the fitted
+   models).
 
 Hand-written (no library segments a light field's blocks into depth layers for a phase-space
 operator); the disparity estimator and the operator are this package's.
@@ -94,8 +95,9 @@ class DepthLayers:
         for the segment to seed that layer (default 0.75; in (0.5, 1)); the random walker on
         the image labels the rest (:mod:`metasensor.recon.layer_segments`).
     misfit_ratio : float
-        The two-layer solve is kept where, in each layer, its r.m.s. data misfit is at most
-        this times the one-bank solve's (default 1.0; :func:`layers_fit_better`).
+        The two-layer solve is kept where, in the layer it defocuses most, its r.m.s. data
+        misfit is at most this times the one-bank solve's (default 1.0;
+        :func:`layers_fit_better`).
     """
 
     min_separation: float = 0.25
@@ -309,8 +311,10 @@ def layered_operator(task, window: np.ndarray, zernike, rows, cols, guide=None):
     return SpaceVariantOperator(banks, weights, geometry, device=task.device), found
 
 
-def layers_fit_better(labels, region: tuple[slice, slice], one, two, ratio: float = 1.0) -> bool:
-    """Whether the two-layer model fits the data better than one bank in each layer.
+def layers_fit_better(labels, region: tuple[slice, slice], one, two, disparity,
+                      ratio: float = 1.0) -> bool:
+    """Whether the two-layer model fits the data of the layer it defocuses most better than
+    one bank.
 
     Parameters
     ----------
@@ -321,20 +325,24 @@ def layers_fit_better(labels, region: tuple[slice, slice], one, two, ratio: floa
     one, two : (h, w) float
         The r.m.s. misfit over the views at each view sample of the one-bank and the
         two-layer solves (:func:`metasensor.recon.block.misfit_map`).
+    disparity : (2,) float
+        The layers' disparities relative to the block's wavefront (:class:`LayerMap`): the
+        layer of the larger magnitude is the one the model gives a defocus the one bank lacks.
     ratio : float
-        The largest r.m.s. misfit of the two-layer fit in a layer, over the one-bank fit's.
+        The largest r.m.s. misfit of the two-layer fit in that layer, over the one-bank fit's.
 
     Returns
     -------
     bool
-        True where each layer holds samples in the region and the two-layer fit's r.m.s.
-        misfit over them is at most ``ratio`` times the one-bank fit's.
+        True where that layer holds samples in the region and the two-layer fit's r.m.s.
+        misfit over them is at most ``ratio`` times the one-bank fit's. The other layer is not
+        compared: the one bank is (nearly) its own, and each solve's data weight follows its
+        own fit's misfit over the whole block, so its misfit there moves either way.
     """
-    lab = np.asarray(labels).astype(bool)[region]
+    k = int(np.argmax(np.abs(np.asarray(disparity, np.float64))))
+    inside = (np.asarray(labels).astype(bool) == bool(k))[region]
+    if not inside.any():
+        return False
     one, two = np.asarray(one, np.float64)[region], np.asarray(two, np.float64)[region]
-    for inside in (~lab, lab):
-        if not inside.any():
-            return False
-        if np.sqrt(np.mean(two[inside] ** 2)) > ratio * np.sqrt(np.mean(one[inside] ** 2)):
-            return False
-    return True
+    return bool(np.sqrt(np.mean(two[inside] ** 2))
+                <= ratio * np.sqrt(np.mean(one[inside] ** 2)))
