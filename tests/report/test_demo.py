@@ -63,7 +63,7 @@ def test_demo_default_edge_mtf50_gain(tmp_path):
 
 
 @pytest.mark.parametrize("settings", [DemoSettings(scan=2), DemoSettings(snr_db=float("nan")),
-                                      DemoSettings(blocks=(0, 0))])
+                                      DemoSettings(blocks=(0, 0)), DemoSettings(field_points=1)])
 def test_demo_rejects_impossible_settings_before_writing_anything(tmp_path, settings):
     with pytest.raises(ValueError):
         run_demo(tmp_path / "out", settings, progress=False)

@@ -70,8 +70,10 @@ class DemoSettings:
     scene: str = "bars"
     # defocus of both light-field cameras [waves r.m.s., Noll Z4] (the 2D sensor stays in focus)
     focus_offset: float = OPERATING_FOCUS_OFFSET
-    # the meta-imaging reconstruction's space-variant model (ReconOptions.space_variant)
+    # the meta-imaging reconstruction's space-variant model (ReconOptions.space_variant) and
+    # its field points per block side (ReconOptions.field_points)
     space_variant: bool = True
+    field_points: int = 2
     # Richardson-Lucy iterations of the plain light field (and of the meta-imaging row with
     # solver "rl"); ISA solver of the meta-imaging row: "hqs" (the sparse-gradient prior,
     # solvers.hqs, after view registration) or "rl". Measurements: docs/decisions.md.
@@ -197,7 +199,10 @@ def _check_settings(s: DemoSettings) -> None:
     """Refuse impossible settings before any output exists."""
     from metasensor.recon.blocks import split_blocks
 
+    from metasensor.recon.options import ReconOptions
+
     SystemConfig(scan=s.scan)  # an impossible scan period fails here
+    ReconOptions(field_points=s.field_points)  # and a grid of fewer than 2 x 2 field points
     if not math.isfinite(s.snr_db):
         raise ValueError(f"snr_db must be a finite number of dB, got {s.snr_db!r}")
     if s.scene not in BAR_LAYOUTS and s.scene != "chart":
@@ -240,7 +245,8 @@ def _reconstruct_both(cap, lf, fz_sensor, scene_shape, s: DemoSettings, steps):
     hqs = s.solver == "hqs"
     rec = ms.reconstruct(views, cap.config, method="isa", zernike=focus, field_zernike=fz_meta,
                          blocks=s.blocks, iterations=None if hqs else s.iterations,
-                         solver=s.solver, register=hqs, space_variant=s.space_variant and hqs)
+                         solver=s.solver, register=hqs, space_variant=s.space_variant and hqs,
+                         field_points=s.field_points)
     steps.update()
     steps.set_postfix_str("reconstructing (plain light field)")
     fz_lf = sensor_field_zernike(fz_sensor, lf.config, scene_shape, lf.truth.shape)
