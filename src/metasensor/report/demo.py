@@ -74,9 +74,13 @@ class DemoSettings:
     # its field points per block side (ReconOptions.field_points)
     space_variant: bool = True
     field_points: int = 2
+    # view registration before the HQS solve (ReconOptions.register); with the space-variant
+    # model it registers the views against the block's mean bank, a blend of PSFs that differ
+    # where the aberration changes (measured both ways: docs/decisions.md)
+    register: bool = True
     # Richardson-Lucy iterations of the plain light field (and of the meta-imaging row with
     # solver "rl"); ISA solver of the meta-imaging row: "hqs" (the sparse-gradient prior,
-    # solvers.hqs, after view registration) or "rl". Measurements: docs/decisions.md.
+    # solvers.hqs) or "rl". Measurements: docs/decisions.md.
     iterations: int | None = 6
     solver: str = "hqs"
     seed: int = 0
@@ -198,11 +202,12 @@ def _figures(out: Path, cap, lf, results: dict, zoom: int) -> dict:
 def _check_settings(s: DemoSettings) -> None:
     """Refuse impossible settings before any output exists."""
     from metasensor.recon.blocks import split_blocks
-
     from metasensor.recon.options import ReconOptions
 
     SystemConfig(scan=s.scan)  # an impossible scan period fails here
     ReconOptions(field_points=s.field_points)  # and a grid of fewer than 2 x 2 field points
+    if not isinstance(s.register, bool):
+        raise TypeError(f"register must be True or False, got {s.register!r}")
     if not math.isfinite(s.snr_db):
         raise ValueError(f"snr_db must be a finite number of dB, got {s.snr_db!r}")
     if s.scene not in BAR_LAYOUTS and s.scene != "chart":
@@ -245,7 +250,8 @@ def _reconstruct_both(cap, lf, fz_sensor, scene_shape, s: DemoSettings, steps):
     hqs = s.solver == "hqs"
     rec = ms.reconstruct(views, cap.config, method="isa", zernike=focus, field_zernike=fz_meta,
                          blocks=s.blocks, iterations=None if hqs else s.iterations,
-                         solver=s.solver, register=hqs, space_variant=s.space_variant and hqs,
+                         solver=s.solver, register=s.register and hqs,
+                         space_variant=s.space_variant and hqs,
                          field_points=s.field_points)
     steps.update()
     steps.set_postfix_str("reconstructing (plain light field)")
