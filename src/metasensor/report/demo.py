@@ -53,9 +53,12 @@ class DemoSettings:
     whole field: on axis sharp; field curvature and astigmatism of ~1.1 waves r.m.s. at the
     edge midpoints, 1.9 at 0.95 of the diagonal (``edge_rms_waves`` in the summary) and 2.1 in
     the corners (the plain Seidel sums of a 135 mm f/10 plastic singlet; ``lens_strength``
-    scales them); ``field_blocks``: grid of PSF banks of the simulator (finer than the
-    reconstruction's field points, so that the simulated field is not the reconstruction's own
-    interpolation of it); ``blocks``: multisite grid of the reconstruction."""
+    scales them); ``field_blocks``: grid of PSF banks of the simulator, blended between their
+    points (finer than the reconstruction's field points and not on them, so that the simulated
+    field is not the reconstruction's own interpolation of it; fine enough that the blend does
+    not split a marginal view's image of a point into displaced copies, which a lens does not
+    do); ``blocks``: multisite grid of the reconstruction, ``field_points`` its field points
+    per block side."""
 
     size: int = 384
     scan: int = 5
@@ -63,7 +66,7 @@ class DemoSettings:
     lens_strength: float = 1.0
     field_px: int = 6004
     blocks: tuple[int, int] = (4, 4)
-    field_blocks: tuple[int, int] = (6, 6)
+    field_blocks: tuple[int, int] = (12, 12)
     # the chart: "bars" (bar groups at nine places, in rows from each box's corner),
     # "bars-field" (the same groups oriented about the field centre) or "chart" (ISO
     # 12233-style: slanted-edge squares, a Siemens star, for the slanted-edge MTF)
@@ -73,11 +76,11 @@ class DemoSettings:
     # the meta-imaging reconstruction's space-variant model (ReconOptions.space_variant) and
     # its field points per block side (ReconOptions.field_points)
     space_variant: bool = True
-    field_points: int = 2
-    # view registration before the HQS solve (ReconOptions.register); with the space-variant
-    # model it registers the views against the block's mean bank, a blend of PSFs that differ
-    # where the aberration changes (measured both ways: docs/decisions.md)
-    register: bool = True
+    field_points: int = 3
+    # view registration before the HQS solve (ReconOptions.register); off: with the known
+    # aberration and the space-variant model it registers the views against the block's mean
+    # bank, a blend of PSFs that differ where the aberration changes (docs/decisions.md)
+    register: bool = False
     # Richardson-Lucy iterations of the plain light field (and of the meta-imaging row with
     # solver "rl"); ISA solver of the meta-imaging row: "hqs" (the sparse-gradient prior,
     # solvers.hqs) or "rl". Measurements: docs/decisions.md.
