@@ -35,7 +35,7 @@ import torch
 
 from metasensor.depth.edgefeatures import edge_samples
 from metasensor.depth.learned import EdgeNet
-from metasensor.depth.scenes import _render_grid, benchmark_scene
+from metasensor.depth.scenes import _render_grid, benchmark_scene, random_ramp
 from metasensor.depth.synthetic import Layer, SyntheticViews, random_texture, render_views
 from metasensor.priors.deadleaves import dead_leaves
 
@@ -94,9 +94,7 @@ def training_scene(nnum: int = 9, size: int = 96, max_disparity: float = 3.0,
                              r_max=float(rng.uniform(4, 16)) * d, leaves=2000)
         return 0.1 + 0.9 * leaves[:shape[0], :shape[1]].astype(np.float64)
 
-    theta = rng.uniform(0, 2 * np.pi)
-    yy, xx = np.mgrid[0:shape[0], 0:shape[1]] / max(shape) * 2 - 1
-    ramp = np.cos(theta) * xx + np.sin(theta) * yy
+    ramp = random_ramp(shape, rng)
     back = span * (rng.uniform(0.2, 0.8) + rng.uniform(0.0, 0.3) * ramp)
     layers = [Layer(np.ones(shape), back * d, texture())]
     count = int(rng.integers(2, 6))
@@ -122,9 +120,7 @@ def photo_scene(nnum: int = 9, size: int = 96, max_disparity: float = 3.0,
     rng = np.random.default_rng(seed)
     names = rng.permutation(TRAINING_PHOTOS)
     span = float(max_disparity)
-    theta = rng.uniform(0, 2 * np.pi)
-    yy, xx = np.mgrid[0:shape[0], 0:shape[1]] / max(shape) * 2 - 1
-    ramp = np.cos(theta) * xx + np.sin(theta) * yy
+    ramp = random_ramp(shape, rng)
     back = span * (rng.uniform(0.3, 0.8) + rng.uniform(0.0, 0.3) * ramp)
     layers = [Layer(np.ones(shape), back * d, _photo(names[0], shape, rng,
                                                      zoom=float(rng.uniform(1.0, 3.0))))]

@@ -168,6 +168,15 @@ def _polygon(shape, rng) -> np.ndarray:
     return alpha
 
 
+def random_ramp(shape: tuple[int, int], rng: np.random.Generator) -> np.ndarray:
+    """A unit-slope ramp over ``shape`` in a random direction (one draw of ``rng``): the
+    normalised coordinate, -1 to 1 along the longer side, projected on that direction; the
+    slant of a scene's background plane."""
+    theta = rng.uniform(0, 2 * np.pi)
+    yy, xx = np.mgrid[0:shape[0], 0:shape[1]] / max(shape) * 2 - 1
+    return np.cos(theta) * xx + np.sin(theta) * yy
+
+
 def natural_scene(nnum: int = 9, size: int = 128, max_disparity: float = 3.0,
                   snr_db: float | None = 40.0, seed: int = 0) -> SyntheticViews:
     """Photographs in front of a photograph: a scene family unlike :data:`SCENES` (natural
@@ -184,9 +193,7 @@ def natural_scene(nnum: int = 9, size: int = 128, max_disparity: float = 3.0,
     rng = np.random.default_rng(seed)
     names = rng.permutation(PHOTOS)
     span = float(max_disparity)
-    theta = rng.uniform(0, 2 * np.pi)
-    yy, xx = np.mgrid[0:shape[0], 0:shape[1]] / max(shape) * 2 - 1
-    ramp = np.cos(theta) * xx + np.sin(theta) * yy
+    ramp = random_ramp(shape, rng)
     layers = [Layer(np.ones(shape), span * (0.6 + 0.3 * ramp) * d, _photo(names[0], shape, rng))]
     disparities = np.sort(rng.uniform(-1.0, 0.3, 3))[::-1] * span   # back to front
     for k, dv in enumerate(disparities):
