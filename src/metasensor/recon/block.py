@@ -345,9 +345,7 @@ def _layered(task: BlockTask, window: np.ndarray, zernike, rows, cols, one: tupl
     quiet = replace(task, progress=None)  # the bar counts one solve per block
     data = window[rows, cols]
     two, _, two_x = _solve(quiet, op, data, zernike, dao_history, [], None, estimate, full=True)
-    ry, rx = task.block.region_in_window()
-    d = task.cfg.scan_step_px
-    region = (slice(ry.start // d, ry.stop // d), slice(rx.start // d, rx.stop // d))
+    region = task.block.region_samples(task.cfg.scan_step_px)
     if not layers_fit_better(found.labels, region, misfit_map(one_op, one_x, data),
                              misfit_map(op, two_x, data), found.disparity,
                              task.layers.misfit_ratio):

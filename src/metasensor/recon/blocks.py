@@ -41,6 +41,11 @@ class Block:
         wy, _, wx, _ = self.window
         return slice(y0 - wy, y1 - wy), slice(x0 - wx, x1 - wx)
 
+    def region_samples(self, d: int) -> tuple[slice, slice]:
+        """The region inside the window in view samples (scan step ``d`` [px])."""
+        ry, rx = self.region_in_window()
+        return slice(ry.start // d, ry.stop // d), slice(rx.start // d, rx.stop // d)
+
 
 def _edges(n_samples: int, parts: int) -> list[int]:
     return [round(i * n_samples / parts) for i in range(parts + 1)]

@@ -292,8 +292,7 @@ def layered_operator(task, window: np.ndarray, zernike, rows, cols, guide=None):
     from metasensor.recon.block import default_psfs
 
     d = task.cfg.scan_step_px
-    ry, rx = task.block.region_in_window()
-    region = (slice(ry.start // d, ry.stop // d), slice(rx.start // d, rx.stop // d))
+    region = task.block.region_samples(d)
     found = find_layers(window, task.cfg, zernike, region, task.layers, task.device,
                         guide)
     if found is None:
