@@ -29,8 +29,8 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["cache_dir", "set_cache_dir", "cache_key", "load", "store", "stats", "clear",
-           "max_bytes", "DEFAULT_MAX_GB"]
+__all__ = ["cache_dir", "set_cache_dir", "cache_key", "load", "load_first", "store", "stats",
+           "clear", "max_bytes", "DEFAULT_MAX_GB"]
 
 DEFAULT_MAX_GB = 10.0
 
@@ -118,7 +118,24 @@ def _path(key: str, folder: Path | None) -> Path:
 
 def load(key: str, folder: Path | None = None) -> np.ndarray | None:
     """The cached array for ``key``, or ``None`` (a miss). Counts in :data:`stats`."""
+    return load_first([key], folder)[1]
+
+
+def load_first(keys, folder: Path | None = None) -> tuple[int | None, np.ndarray | None]:
+    """The first of ``keys`` that is cached: ``(its index, the array)``, or ``(None, None)``.
+    Counts one hit or one miss in :data:`stats`, however many keys were tried."""
     max_bytes()  # a bad size setting is reported before the work, not after it
+    for index, key in enumerate(keys):
+        arr = _load_one(key, folder)
+        if arr is not None:
+            stats["hits"] += 1
+            return index, arr
+    stats["misses"] += 1
+    return None, None
+
+
+def _load_one(key: str, folder: Path | None) -> np.ndarray | None:
+    """The cached array for ``key`` or None; a damaged entry is removed (a miss)."""
     path = _path(key, folder)
     if path.is_file():
         try:
@@ -129,11 +146,9 @@ def load(key: str, folder: Path | None = None) -> np.ndarray | None:
             with contextlib.suppress(OSError):
                 path.unlink()
         else:
-            stats["hits"] += 1
             with contextlib.suppress(OSError):
                 os.utime(path)  # recently used: the last to be evicted
             return arr
-    stats["misses"] += 1
     return None
 
 

@@ -61,6 +61,7 @@ from metasensor.optics.coherent import (
 )
 from metasensor.optics.psf_args import check_config, check_depth, check_odd, check_zernike
 from metasensor.optics.pupil import PupilFn, disk_fraction, pupil_amplitude, pupil_phase
+from metasensor.optics.symmetry import SYMMETRIES, mirror_pupil, unmirror_bank
 
 __all__ = ["view_psfs", "PSF_CODE_VERSION", "ENERGY_CUT"]
 
@@ -76,6 +77,7 @@ def _reference_pupil(cfg: SystemConfig, zernike, depth: float, phase: PupilFn | 
     The arrays key the cache (everything the bank depends on, before any heavy work)."""
     n = 257
     t = np.linspace(-1.02, 1.02, n)
+    t = 0.5 * (t - t[::-1])  # exactly odd, so a mirrored pupil samples the mirrored values
     rx, ry = np.meshgrid(t, t, indexing="xy")
     a = pupil_amplitude(cfg, rx, ry, t[1] - t[0], amplitude)
     if zernike is None and depth == 0 and phase is None:
@@ -173,7 +175,9 @@ def view_psfs(cfg: SystemConfig, zernike=None, depth: float = 0.0, *,
     cache : True (default cache folder, see :mod:`metasensor.optics.cache`), False (bypass) or
         a folder path. The key hashes the code version, ``cfg.optical_digest()`` (not the scan),
         the pupil amplitude and wavefront evaluated on a fixed 257² grid, depth, subsample, size,
-        oversample, ``points`` and ``band_limited``.
+        oversample, ``points`` and ``band_limited``. A miss looks up the pupil's seven mirror
+        images too (:mod:`metasensor.optics.symmetry`: the bank of a mirrored pupil is the
+        mirrored bank), so a centred lens's symmetric field points share one computation.
     oversample : simulation samples per pixel per axis (odd multiple of subsample; default >= 3).
     points : odd number of point positions (and output samples) per lenslet pitch and axis, or
         None (``nnum · subsample``). Another value samples the bank on a grid of pitch
@@ -197,13 +201,15 @@ def view_psfs(cfg: SystemConfig, zernike=None, depth: float = 0.0, *,
     folder = None if cache is True or cache is False else Path(cache)
     key = None
     if cache is not False:
-        key = _cache.cache_key(PSF_CODE_VERSION, "view_psfs", cfg.optical_digest(),
-                               a_ref.astype(np.float32), w_ref.astype(np.float32), depth, sub,
-                               size, os_, *(() if points is None else ("points", npts)),
-                               *(("band",) if band_limited else ()))
-        hit = _cache.load(key, folder)
-        if hit is not None:
-            return hit
+        keys = [_cache.cache_key(PSF_CODE_VERSION, "view_psfs", cfg.optical_digest(),
+                                 mirror_pupil(a_ref, g).astype(np.float32),
+                                 mirror_pupil(w_ref, g).astype(np.float32), depth, sub, size, os_,
+                                 *(() if points is None else ("points", npts)),
+                                 *(("band",) if band_limited else ())) for g in SYMMETRIES]
+        key = keys[0]
+        index, hit = _cache.load_first(keys, folder)
+        if hit is not None:  # this pupil's bank, or a mirror image's (optics/symmetry.py)
+            return unmirror_bank(hit, SYMMETRIES[index]) if index else hit
 
     cpu0 = time.process_time()
     grid = npts / (cfg.nnum * sub)  # output samples per pixel/subsample (1 unless ``points``)

@@ -1,0 +1,83 @@
+"""The square lenslet grid's eight mirror symmetries, acting on pupils and on PSF banks.
+
+The optics of :func:`metasensor.optics.psf.view_psfs` (square lenslets on a square grid over a
+square pixel grid; circular or square lenslet apertures; a radial pupil amplitude, obstruction
+and apodization) are unchanged by the dihedral group of the square: the mirrors ``x ↦ −x`` and
+``y ↦ −y`` and the swap ``x ↔ y``, and their compositions. So the PSF bank of a mirrored
+wavefront is the mirrored bank, with the views permuted the same way:
+
+- pupil ``ρ_y ↦ −ρ_y``: ``H[u, v, y, x] ↦ H[n−1−u, v, −y, x]``;
+- pupil ``ρ_x ↦ −ρ_x``: ``H[u, v, y, x] ↦ H[u, n−1−v, y, −x]``;
+- pupil ``ρ_x ↔ ρ_y``: ``H[u, v, y, x] ↦ H[v, u, x, y]``.
+
+(Axes ``[u, v, y, x]``: ``u`` indexes the pupil's y, ``v`` its x; a bank's centre sample is zero
+displacement, so the image mirrors are exact array flips.) A lens whose aberrations are
+symmetric over its field (any centred lens) repeats each bank at up to eight field points; the
+PSF cache looks a bank up under all eight images of its pupil, so each is computed once.
+Hand-written: a bookkeeping of array flips, tested against directly computed banks.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["Symmetry", "SYMMETRIES", "mirror_pupil", "unmirror_bank"]
+
+
+class Symmetry(tuple):
+    """One element ``(flip_y, flip_x, swap)`` of the group: flip the pupil's y and/or x axis,
+    then swap the axes."""
+
+    __slots__ = ()
+
+    def __new__(cls, flip_y: bool, flip_x: bool, swap: bool):
+        return super().__new__(cls, (bool(flip_y), bool(flip_x), bool(swap)))
+
+
+SYMMETRIES = tuple(Symmetry(fy, fx, sw) for sw in (False, True) for fy in (False, True)
+                   for fx in (False, True))
+"""The eight elements, the identity first."""
+
+
+def mirror_pupil(pupil: np.ndarray, g: Symmetry) -> np.ndarray:
+    """``g`` applied to a pupil map sampled on a grid symmetric about its centre.
+
+    Parameters
+    ----------
+    pupil : numpy.ndarray
+        ``(N, N)`` map, rows along the pupil's y, columns along its x (a ``meshgrid(...,
+        indexing="xy")`` layout).
+    g : Symmetry
+        The element.
+
+    Returns
+    -------
+    numpy.ndarray
+        The mirrored map (a view where possible).
+    """
+    flip_y, flip_x, swap = g
+    out = pupil[::-1 if flip_y else 1, ::-1 if flip_x else 1]
+    return out.T if swap else out
+
+
+def unmirror_bank(bank: np.ndarray, g: Symmetry) -> np.ndarray:
+    """The bank of a pupil from the bank of its image under ``g`` (``g``'s inverse on banks:
+    undo the swap, then the flips).
+
+    Parameters
+    ----------
+    bank : numpy.ndarray
+        ``(n, n, K, K)`` bank ``H[u, v, y, x]`` of the pupil ``mirror_pupil(P, g)``.
+    g : Symmetry
+        The element.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``(n, n, K, K)`` bank of ``P``, a new contiguous array of ``bank``'s dtype.
+    """
+    flip_y, flip_x, swap = g
+    out = bank.transpose(1, 0, 3, 2) if swap else bank
+    ys = slice(None, None, -1 if flip_y else 1)
+    xs = slice(None, None, -1 if flip_x else 1)
+    return np.ascontiguousarray(out[ys, xs, ys, xs])
