@@ -140,20 +140,31 @@ class PhaseSpaceOperator(GridShapes):
         nh = self.geometry.domain[1] // 2 + 1
         return torch.zeros((d, my, nh), dtype=torch.complex64, device=self.device)
 
+    def conj_tiles(self, samples: torch.Tensor) -> torch.Tensor:
+        """conj(fft2) of view samples ``(c, My, Mx)``, tiled along the columns to the half
+        spectrum's ``(c, My, Nx//2+1)``: the part of :meth:`backproject_conj` that does not
+        depend on the bank (operators on one geometry can share it)."""
+        _, mx = self.geometry.grid
+        nh = self.geometry.domain[1] // 2 + 1
+        small_conj = torch.fft.ifft2(samples, norm="forward")  # = conj(fft2(samples)), real input
+        reps = -(-nh // mx)
+        return small_conj.repeat(1, 1, reps)[..., :nh] if reps > 1 else small_conj[..., :nh]
+
     def backproject_conj(self, samples: torch.Tensor, views: slice | torch.Tensor,
-                         acc: torch.Tensor | None = None) -> torch.Tensor:
+                         acc: torch.Tensor | None = None,
+                         tiles: torch.Tensor | None = None) -> torch.Tensor:
         """Accumulate the *conjugate* of the back-projected half spectrum, Σ OTF·conj(U), into
         ``acc`` (d, My, Nh) in place; :meth:`image_from_conj` turns it into Aᵀ·samples.
         Conjugating once per sum instead of once per view chunk saves a full-size copy per chunk;
-        conj(fft2(x)) of the real samples is their unnormalised inverse FFT (no copy either)."""
+        conj(fft2(x)) of the real samples is their unnormalised inverse FFT (no copy either).
+        ``tiles``: :meth:`conj_tiles` of ``samples`` when already computed (``samples`` is then
+        not read)."""
         d = self.geometry.d
-        my, mx = self.geometry.grid
+        my, _ = self.geometry.grid
         nh = self.geometry.domain[1] // 2 + 1
         if acc is None:
             acc = self.new_conj_accumulator()
-        small_conj = torch.fft.ifft2(samples, norm="forward")  # = conj(fft2(samples)), real input
-        reps = -(-nh // mx)
-        tiled = small_conj.repeat(1, 1, reps)[..., :nh] if reps > 1 else small_conj[..., :nh]
+        tiled = self.conj_tiles(samples) if tiles is None else tiles
         otf = self.otf[views]
         for i in range(otf.shape[0]):
             acc.addcmul_(otf[i].view(d, my, nh), tiled[i][None])

@@ -185,9 +185,9 @@ class SpaceVariantOperator(GridShapes):
         start = 0
         for c in self._views(views):
             count = len(range(self.n_views)[c]) if isinstance(c, slice) else len(c)
-            part = samples[start:start + count]
+            tiles = self.ops[0].conj_tiles(samples[start:start + count])  # shared by the banks
             for op, acc in zip(self.ops, accs, strict=True):
-                op.backproject_conj(part, c, acc)
+                op.backproject_conj(None, c, acc, tiles)
             start += count
         out = torch.zeros(self.geometry.domain, device=self.device)
         for op, acc, wf in zip(self.ops, accs, self.weights, strict=True):
