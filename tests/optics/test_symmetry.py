@@ -65,3 +65,16 @@ def test_unmirror_bank_inverts_the_view_and_image_mirrors():
         bank = view_psfs(cfg, phase=_mirrored(g), size=7, cache=False)
         np.testing.assert_allclose(unmirror_bank(bank, g), base, rtol=0,
                                    atol=1e-6 * base.max())
+
+
+@pytest.mark.parametrize("kwargs", [{"subsample": 3, "band_limited": True}, {"points": 9}])
+def test_mirror_images_hold_for_the_simulator_and_point_grids(kwargs):
+    """The simulator's banks (3× sub-sampled, band-limited) and banks on another point grid
+    obey the same mirrors: 2e-6 of the maximum (measured 1.2e-6 and 4.4e-7 on the default
+    system; the band-limited bank's interpolation adds to float32 rounding)."""
+    cfg = SystemConfig(nnum=3, mla_pitch=3 * 4.6e-6, mla_focal=3 * 46e-6, scan=3)
+    base = view_psfs(cfg, phase=_phase, size=5, cache=False, **kwargs)
+    for g in SYMMETRIES[1:]:
+        bank = view_psfs(cfg, phase=_mirrored(g), size=5, cache=False, **kwargs)
+        np.testing.assert_allclose(unmirror_bank(bank, g), base, rtol=0,
+                                   atol=2e-6 * base.max())
