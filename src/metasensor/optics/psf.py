@@ -177,7 +177,9 @@ def view_psfs(cfg: SystemConfig, zernike=None, depth: float = 0.0, *,
         the pupil amplitude and wavefront evaluated on a fixed 257² grid, depth, subsample, size,
         oversample, ``points`` and ``band_limited``. A miss looks up the pupil's seven mirror
         images too (:mod:`metasensor.optics.symmetry`: the bank of a mirrored pupil is the
-        mirrored bank), so a centred lens's symmetric field points share one computation.
+        mirrored bank), so a centred lens's symmetric field points share one computation; such
+        a bank equals the direct computation to float32 rounding (a few 1e-7 of its maximum),
+        so which of the two a call returns depends on what the cache held before.
     oversample : simulation samples per pixel per axis (odd multiple of subsample; default >= 3).
     points : odd number of point positions (and output samples) per lenslet pitch and axis, or
         None (``nnum · subsample``). Another value samples the bank on a grid of pitch
