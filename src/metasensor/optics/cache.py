@@ -122,8 +122,9 @@ def load(key: str, folder: Path | None = None) -> np.ndarray | None:
 
 
 def load_first(keys, folder: Path | None = None) -> tuple[int | None, np.ndarray | None]:
-    """The first of ``keys`` that is cached: ``(its index, the array)``, or ``(None, None)``.
-    Counts one hit or one miss in :data:`stats`, however many keys were tried."""
+    """The first of ``keys`` (any iterable, consumed in order until a hit) that is cached:
+    ``(its index, the array)``, or ``(None, None)``. Counts one hit or one miss in
+    :data:`stats`, however many keys were tried."""
     max_bytes()  # a bad size setting is reported before the work, not after it
     for index, key in enumerate(keys):
         arr = _load_one(key, folder)

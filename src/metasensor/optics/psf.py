@@ -203,13 +203,17 @@ def view_psfs(cfg: SystemConfig, zernike=None, depth: float = 0.0, *,
     folder = None if cache is True or cache is False else Path(cache)
     key = None
     if cache is not False:
-        keys = [_cache.cache_key(PSF_CODE_VERSION, "view_psfs", cfg.optical_digest(),
-                                 mirror_pupil(a_ref, g).astype(np.float32),
-                                 mirror_pupil(w_ref, g).astype(np.float32), depth, sub, size, os_,
-                                 *(() if points is None else ("points", npts)),
-                                 *(("band",) if band_limited else ())) for g in SYMMETRIES]
-        key = keys[0]
-        index, hit = _cache.load_first(keys, folder)
+        def key_of(g):
+            return _cache.cache_key(PSF_CODE_VERSION, "view_psfs", cfg.optical_digest(),
+                                    mirror_pupil(a_ref, g).astype(np.float32),
+                                    mirror_pupil(w_ref, g).astype(np.float32), depth, sub, size,
+                                    os_, *(() if points is None else ("points", npts)),
+                                    *(("band",) if band_limited else ()))
+
+        key = key_of(SYMMETRIES[0])
+        # the mirror images' keys are hashed only after the pupil's own key missed
+        index, hit = _cache.load_first((key if i == 0 else key_of(g)
+                                        for i, g in enumerate(SYMMETRIES)), folder)
         if hit is not None:  # this pupil's bank, or a mirror image's (optics/symmetry.py)
             return unmirror_bank(hit, SYMMETRIES[index]) if index else hit
 

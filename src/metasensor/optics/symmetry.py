@@ -24,18 +24,12 @@ import numpy as np
 __all__ = ["Symmetry", "SYMMETRIES", "mirror_pupil", "unmirror_bank"]
 
 
-class Symmetry(tuple):
-    """One element ``(flip_y, flip_x, swap)`` of the group: flip the pupil's y and/or x axis,
-    then swap the axes."""
+Symmetry = tuple[bool, bool, bool]
+"""One element ``(flip_y, flip_x, swap)`` of the group: flip the pupil's y and/or x axis, then
+swap the axes."""
 
-    __slots__ = ()
-
-    def __new__(cls, flip_y: bool, flip_x: bool, swap: bool):
-        return super().__new__(cls, (bool(flip_y), bool(flip_x), bool(swap)))
-
-
-SYMMETRIES = tuple(Symmetry(fy, fx, sw) for sw in (False, True) for fy in (False, True)
-                   for fx in (False, True))
+SYMMETRIES: tuple[Symmetry, ...] = tuple((fy, fx, sw) for sw in (False, True)
+                                         for fy in (False, True) for fx in (False, True))
 """The eight elements, the identity first."""
 
 
