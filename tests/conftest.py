@@ -4,7 +4,9 @@ import os
 import shutil
 import tempfile
 
-os.environ.setdefault("OMP_NUM_THREADS", "2")
+# under pytest-xdist each of the workers gets one thread, so two workers share two cores
+_THREADS = 1 if "PYTEST_XDIST_WORKER" in os.environ else 2
+os.environ.setdefault("OMP_NUM_THREADS", str(_THREADS))
 # PSF banks of the tests go to a private cache, never into the user's ~/.cache; it is removed
 # when the session ends (up to 1.7 GB per run was left in the temporary folder before)
 _OWN_CACHE = None
@@ -15,7 +17,7 @@ if "METASENSOR_CACHE" not in os.environ:
 import pytest  # noqa: E402
 import torch  # noqa: E402
 
-torch.set_num_threads(min(2, torch.get_num_threads()))
+torch.set_num_threads(min(_THREADS, torch.get_num_threads()))
 
 
 def pytest_unconfigure(config):

@@ -134,8 +134,10 @@ def _run() -> None:
         from typer._click import exceptions as click
     except ImportError:  # pragma: no cover
         from click import exceptions as click
+    from metasensor.config_text import drop_fallbacks
     from metasensor.io.interrupt import received, taken
 
+    drop_fallbacks()  # a note left by an earlier command of this process is not this one's
     since = taken()
     try:
         code = app(standalone_mode=False)

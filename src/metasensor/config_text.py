@@ -12,8 +12,8 @@ from typing import TYPE_CHECKING, Any
 if TYPE_CHECKING:
     from metasensor.config import SystemConfig
 
-__all__ = ["ConfigError", "FALLBACK_FIELDS", "note_fallbacks", "parse_text", "say_fallbacks",
-           "toml_value"]
+__all__ = ["ConfigError", "FALLBACK_FIELDS", "drop_fallbacks", "note_fallbacks", "parse_text",
+           "say_fallbacks", "toml_value"]
 
 
 # optics a TOML should set for its own system; missing ones fall back to the prototype's
@@ -51,6 +51,13 @@ def say_fallbacks(cfg: SystemConfig | None = None) -> None:
         note = _PENDING.pop(key, None)
         if note is not None:
             print(note, file=sys.stderr)
+
+
+def drop_fallbacks() -> None:
+    """Forget the notes not said yet: the CLI calls it when a command starts, so a command
+    that failed before its optics were used does not leave its note to the next command run
+    in the same process (the napari plugin, scripts calling ``main``)."""
+    _PENDING.clear()
 
 
 class ConfigError(ValueError):
