@@ -63,11 +63,26 @@ def test_demo_default_edge_mtf50_gain(tmp_path):
 
 
 @pytest.mark.parametrize("settings", [DemoSettings(scan=2), DemoSettings(snr_db=float("nan")),
-                                      DemoSettings(blocks=(0, 0)), DemoSettings(field_points=1)])
+                                      DemoSettings(blocks=(0, 0)), DemoSettings(field_points=1),
+                                      DemoSettings(workers=0)])
 def test_demo_rejects_impossible_settings_before_writing_anything(tmp_path, settings):
     with pytest.raises(ValueError):
         run_demo(tmp_path / "out", settings, progress=False)
     assert not (tmp_path / "out").exists()
+
+
+def test_demo_runs_a_block_per_cpu_thread_unless_told(monkeypatch):
+    import torch
+
+    from metasensor.report.demo import demo_workers
+
+    monkeypatch.setattr(torch, "get_num_threads", lambda: 2)
+    monkeypatch.setattr("metasensor.backend.resolve_device", lambda _d=None: torch.device("cpu"))
+    assert demo_workers(DemoSettings()) == 2
+    assert demo_workers(DemoSettings(blocks=(1, 1))) == 1  # never more workers than blocks
+    assert demo_workers(DemoSettings(workers=3)) == 3
+    monkeypatch.setattr("metasensor.backend.resolve_device", lambda _d=None: torch.device("cuda"))
+    assert demo_workers(DemoSettings()) == 1  # one GPU: one block at a time
 
 
 @pytest.mark.slow
