@@ -78,3 +78,24 @@ def test_mirror_images_hold_for_the_simulator_and_point_grids(kwargs):
         bank = view_psfs(cfg, phase=_mirrored(g), size=5, cache=False, **kwargs)
         np.testing.assert_allclose(unmirror_bank(bank, g), base, rtol=0,
                                    atol=2e-6 * base.max())
+
+
+def test_cache_serves_the_mirror_images_of_a_widefield_psf(tmp_path):
+    """The 2D sensor's PSF of a mirrored pupil is the mirrored PSF: after one computed PSF the
+    seven mirror images are cache hits, each equal to its direct computation to 1e-6 of the
+    maximum (float64 field, float32 output)."""
+    from metasensor.optics.widefield import widefield_psf
+
+    cfg = SystemConfig(nnum=3, mla_pitch=3 * 4.6e-6, mla_focal=3 * 46e-6, scan=3)
+    stats = psf_cache.stats
+    base = widefield_psf(cfg, phase=_phase, size=15, cache=tmp_path)
+    assert base.shape == (15, 15)
+    for g in SYMMETRIES[1:]:
+        hits = stats["hits"]
+        served = widefield_psf(cfg, phase=_mirrored(g), size=15, cache=tmp_path)
+        assert stats["hits"] == hits + 1, g
+        direct = widefield_psf(cfg, phase=_mirrored(g), size=15, cache=False)
+        assert served.dtype == np.float32 and served.flags.c_contiguous
+        np.testing.assert_allclose(served, direct, rtol=0, atol=1e-6 * direct.max())
+        assert np.abs(direct - base).max() > 1e-3 * base.max()  # the mirror is not trivial
+    assert len(list((tmp_path / "psf").glob("*.npy"))) == 1

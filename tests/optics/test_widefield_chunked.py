@@ -39,7 +39,7 @@ def test_widefield_psf_takes_the_chunked_path_above_the_memory_limit(monkeypatch
     # With the limit lowered below this grid's size the result is unchanged (< 1e-6 relative)
     z = np.zeros(12)
     z[4] = 0.6
-    ref = wf_mod.widefield_psf(CFG, z, size=41)
+    ref = wf_mod.widefield_psf(CFG, z, size=41, cache=False)
     monkeypatch.setattr(wf_mod, "WIDEFIELD_FFT_BYTES", 1024)
     calls = []
 
@@ -48,6 +48,6 @@ def test_widefield_psf_takes_the_chunked_path_above_the_memory_limit(monkeypatch
         return binned_intensity_mft(*args, **kw)
 
     monkeypatch.setattr(wf_mod, "binned_intensity_mft", spy)
-    got = wf_mod.widefield_psf(CFG, z, size=41)
+    got = wf_mod.widefield_psf(CFG, z, size=41, cache=False)
     assert len(calls) == 1
     assert np.abs(got - ref).max() < 1e-6 * ref.max()

@@ -10,14 +10,18 @@ integrated over pixels of the given side.
 from __future__ import annotations
 
 import math
+import time
+from pathlib import Path
 
 import numpy as np
 import torch
 
 from metasensor.backend import resolve_device
 from metasensor.config import SystemConfig, say_fallbacks
+from metasensor.optics import cache as _cache
 from metasensor.optics.coherent import binned_intensity_mft, plan_field, point_field, pupil_samples
 from metasensor.optics.psf import (
+    PSF_CODE_VERSION,
     _bin,
     _crop,
     _ray_reach,
@@ -26,6 +30,7 @@ from metasensor.optics.psf import (
 )
 from metasensor.optics.psf_args import check_config, check_depth, check_odd, check_zernike
 from metasensor.optics.pupil import PupilFn
+from metasensor.optics.symmetry import SYMMETRIES, mirror_pupil, unmirror_bank
 
 __all__ = ["widefield_psf", "WIDEFIELD_FFT_BYTES"]
 
@@ -36,14 +41,16 @@ WIDEFIELD_FFT_BYTES = 1 << 30
 
 def widefield_psf(cfg: SystemConfig, zernike=None, depth: float = 0.0, sampling=None, *,
                   phase: PupilFn | None = None, amplitude=None, size: int | None = None,
-                  device=None) -> np.ndarray:
+                  device=None, cache=True) -> np.ndarray:
     """PSF of a conventional 2D sensor behind the same lens: (K, K) float32.
 
     Each value is the fraction of a unit point's photons on a pixel of side ``sampling``
     (default ``cfg.pixel_pitch``) [m], centre index ``K // 2`` = the point; the sum is the
     fraction of light on the K×K window (≈ 1 for the clear pupil). Same pupil arguments as
     :func:`metasensor.optics.psf.view_psfs`. ``size`` None: smallest odd K keeping >= 99.5 %
-    of the energy.
+    of the energy. ``cache``: as :func:`metasensor.optics.psf.view_psfs` (the key hashes the
+    pupil on the same grid, depth, ``sampling`` and ``size``; a miss looks up the pupil's seven
+    mirror images, whose PSF is the mirrored PSF).
     """
     check_config(cfg)
     say_fallbacks(cfg)
@@ -56,7 +63,31 @@ def widefield_psf(cfg: SystemConfig, zernike=None, depth: float = 0.0, sampling=
             or not (math.isfinite(sampling) and sampling > 0):
         raise ValueError(f"sampling must be a positive pixel size in metres, got {sampling!r}")
     dev = resolve_device(device)
-    gmax = _reference_pupil(cfg, z, depth, phase, amplitude)[2]
+    a_ref, w_ref, gmax = _reference_pupil(cfg, z, depth, phase, amplitude)
+    folder = None if cache is True or cache is False else Path(cache)
+    key = None
+    if cache is not False:
+        def key_of(g):
+            return _cache.cache_key(PSF_CODE_VERSION, "widefield_psf", cfg.optical_digest(),
+                                    mirror_pupil(a_ref, g).astype(np.float32),
+                                    mirror_pupil(w_ref, g).astype(np.float32), depth,
+                                    float(sampling), size)
+
+        key = key_of(SYMMETRIES[0])
+        index, hit = _cache.load_first((key if i == 0 else key_of(g)
+                                        for i, g in enumerate(SYMMETRIES)), folder)
+        if hit is not None:  # this pupil's PSF, or a mirror image's (optics/symmetry.py)
+            return unmirror_bank(hit[None, None], SYMMETRIES[index])[0, 0] if index else hit
+    cpu0 = time.process_time()
+    out = _widefield(cfg, z, depth, phase, amplitude, sampling, size, gmax, dev)
+    if key is not None:
+        _cache.stats["compute_seconds"] += time.process_time() - cpu0
+        _cache.store(key, out, folder)
+    return out
+
+
+def _widefield(cfg, z, depth, phase, amplitude, sampling, size, gmax, dev) -> np.ndarray:
+    """:func:`widefield_psf`'s computation (its arguments checked)."""
     if size is None:  # search window: the ray bundle plus 30 λ/NA
         reach = _ray_reach(cfg, gmax) + 30.0 * cfg.wavelength / cfg.na
         npix = 2 * math.ceil(reach / sampling) + 1

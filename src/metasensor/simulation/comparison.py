@@ -129,7 +129,7 @@ def comparison_sensors(cap, reference: np.ndarray, plan, zernike, field_zernike,
 
     from metasensor.simulation.noise import apply_noise
     from metasensor.simulation.render import Lattice
-    from metasensor.simulation.sampling import accumulate
+    from metasensor.simulation.sampling import accumulate, prefetch_kernels
     from metasensor.simulation.turbulence import screen_phase
 
     banks, comps, dev = plan.banks, plan.comps, plan.banks.device
@@ -138,8 +138,12 @@ def comparison_sensors(cap, reference: np.ndarray, plan, zernike, field_zernike,
     screen = None if plan.screens is None else plan.screens[int(round(plan.tref))]
     turb = None if screen is None else screen_phase(screen)
     out = torch.zeros((1, ly, lx), dtype=torch.float32, device=dev)
-    accumulate(reference, comps, lambda cp: banks.widefield(cp.zernike, cp.depth, turb, "t"),
-               rows, cols, out, dev)
+
+    def kernel_of(cp):
+        return banks.widefield(cp.zernike, cp.depth, turb, "t")
+
+    prefetch_kernels(comps, kernel_of, dev)
+    accumulate(reference, comps, kernel_of, rows, cols, out, dev)
     s2d = out[0].cpu().numpy() * np.float32(cap.scale)
     if ao_segments == 0:
         cap.sensor2d_clean = s2d
