@@ -246,18 +246,14 @@ def _simulate_both(scene: np.ndarray, cfg: SystemConfig, fz_sensor, s: DemoSetti
 
 
 def demo_workers(s: DemoSettings) -> int:
-    """Blocks the demo reconstructs at once: ``s.workers``, or one per torch thread on the CPU
-    (the banks' products stream memory on one thread each; two blocks on two threads run
-    nearly twice as fast as one block on both) and one on CUDA."""
+    """Blocks the demo reconstructs at once: ``s.workers``, or
+    :func:`metasensor.recon.parallel.local_workers` (one per torch thread on the CPU, one on
+    CUDA)."""
     if s.workers is not None:
         return int(s.workers)
-    from metasensor.backend import resolve_device
+    from metasensor.recon.parallel import local_workers
 
-    if resolve_device(None).type != "cpu":
-        return 1
-    import torch
-
-    return max(1, min(torch.get_num_threads(), s.blocks[0] * s.blocks[1]))
+    return local_workers(s.blocks[0] * s.blocks[1])
 
 
 def _reconstruct_both(cap, lf, fz_sensor, scene_shape, s: DemoSettings, steps):

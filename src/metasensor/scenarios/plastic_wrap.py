@@ -181,6 +181,7 @@ def run_plastic_wrap(out: str | Path, settings: PlasticWrapSettings | None = Non
     """Run the scenario and write its report into ``out``; returns the summary."""
     import metasensor as ms
     from metasensor.io.figures import save_panel
+    from metasensor.recon.parallel import local_workers
     from metasensor.scenarios.measure import frequency_floor
     from metasensor.scenarios.report import save_maps, scenario_run
 
@@ -198,12 +199,14 @@ def run_plastic_wrap(out: str | Path, settings: PlasticWrapSettings | None = Non
         steps.update()
         cpu.append(time.process_time())
         views = ms.realign(cap.frames, cap.config, cap.scan_order)
+        workers = local_workers(s.blocks[0] * s.blocks[1])  # a block per CPU thread
         rec = ms.reconstruct(views, cap.config, method="wave", blocks=s.blocks,
-                             iterations=s.iterations,
+                             iterations=s.iterations, num_workers=workers,
                              depth_layers=s.depth_layers if s.iterations is None else "off")
         steps.update()
         cpu.append(time.process_time())
-        rec_lf = ms.reconstruct(lf.views, lf.config, blocks=s.blocks, solver="rl")
+        rec_lf = ms.reconstruct(lf.views, lf.config, blocks=s.blocks, solver="rl",
+                                num_workers=workers)
         steps.update()
         cpu.append(time.process_time())
         images = {"2D sensor": cap.sensor2d, "plain light field": rec_lf.image,

@@ -237,15 +237,17 @@ def _figures(out: Path, s: TelescopeSettings, truth, images: dict, kymos: dict, 
 def _reconstructions(corrected, cfg_est, s: TelescopeSettings) -> dict:
     """The meta-imaging images without and with DAO (and with the check solver, if set)."""
     import metasensor as ms
+    from metasensor.recon.parallel import local_workers
 
-    recs = {}
+    recs, workers = {}, local_workers(s.blocks[0] * s.blocks[1])
     for tag, it in (("", s.iterations), (f" (RL {s.check_iterations})", s.check_iterations)):
         if tag and it is None:
             continue
-        recs[f"meta-imaging, no DAO{tag}"] = ms.reconstruct(corrected, cfg_est,
-                                                             blocks=s.blocks, iterations=it)
+        recs[f"meta-imaging, no DAO{tag}"] = ms.reconstruct(
+            corrected, cfg_est, blocks=s.blocks, iterations=it, num_workers=workers)
         recs[f"meta-imaging + DAO{tag}"] = ms.reconstruct(
-            corrected, cfg_est, method="wave", blocks=s.blocks, iterations=it)
+            corrected, cfg_est, method="wave", blocks=s.blocks, iterations=it,
+            num_workers=workers)
     return recs
 
 
