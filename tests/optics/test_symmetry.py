@@ -25,6 +25,24 @@ def _mirrored(g):
     return (lambda x, y: flipped(y, x)) if swap else flipped
 
 
+def _check_mirrors_served(compute, folder):
+    """``compute(phase, cache)`` of the asymmetric phase, then of its seven mirror images: each
+    a cache hit equal to its direct computation to 1e-6 of the maximum, and unequal to the
+    first (the mirror is not trivial); one file in the cache. Returns the first result."""
+    stats = psf_cache.stats
+    base = compute(_phase, folder)
+    for g in SYMMETRIES[1:]:
+        hits = stats["hits"]
+        served = compute(_mirrored(g), folder)
+        assert stats["hits"] == hits + 1, g
+        direct = compute(_mirrored(g), False)
+        assert served.dtype == np.float32 and served.flags.c_contiguous
+        np.testing.assert_allclose(served, direct, rtol=0, atol=1e-6 * direct.max())
+        assert np.abs(direct - base).max() > 1e-3 * base.max()
+    assert len(list((folder / "psf").glob("*.npy"))) == 1
+    return base
+
+
 def test_group_on_pupil_arrays():
     """The eight elements are distinct, the identity first, and each maps a grid symmetric
     about its centre onto itself (reference: index arithmetic)."""
@@ -43,16 +61,8 @@ def test_cache_serves_the_mirror_images_of_a_bank(tmp_path, aperture, obstructio
     about 2e-7 on the default 15 x 15 system)."""
     cfg = SystemConfig(nnum=3, mla_pitch=3 * 4.6e-6, mla_focal=3 * 46e-6, scan=3,
                        lenslet_aperture=aperture, obstruction=obstruction)
-    stats = psf_cache.stats
-    view_psfs(cfg, phase=_phase, size=9, cache=tmp_path)
-    for g in SYMMETRIES[1:]:
-        hits = stats["hits"]
-        served = view_psfs(cfg, phase=_mirrored(g), size=9, cache=tmp_path)
-        assert stats["hits"] == hits + 1, g
-        direct = view_psfs(cfg, phase=_mirrored(g), size=9, cache=False)
-        assert served.dtype == np.float32 and served.flags.c_contiguous
-        np.testing.assert_allclose(served, direct, rtol=0, atol=1e-6 * direct.max())
-    assert len(list((tmp_path / "psf").glob("*.npy"))) == 1
+    _check_mirrors_served(lambda phase, cache: view_psfs(cfg, phase=phase, size=9, cache=cache),
+                          tmp_path)
 
 
 def test_unmirror_bank_inverts_the_view_and_image_mirrors():
@@ -87,15 +97,6 @@ def test_cache_serves_the_mirror_images_of_a_widefield_psf(tmp_path):
     from metasensor.optics.widefield import widefield_psf
 
     cfg = SystemConfig(nnum=3, mla_pitch=3 * 4.6e-6, mla_focal=3 * 46e-6, scan=3)
-    stats = psf_cache.stats
-    base = widefield_psf(cfg, phase=_phase, size=15, cache=tmp_path)
+    base = _check_mirrors_served(
+        lambda phase, cache: widefield_psf(cfg, phase=phase, size=15, cache=cache), tmp_path)
     assert base.shape == (15, 15)
-    for g in SYMMETRIES[1:]:
-        hits = stats["hits"]
-        served = widefield_psf(cfg, phase=_mirrored(g), size=15, cache=tmp_path)
-        assert stats["hits"] == hits + 1, g
-        direct = widefield_psf(cfg, phase=_mirrored(g), size=15, cache=False)
-        assert served.dtype == np.float32 and served.flags.c_contiguous
-        np.testing.assert_allclose(served, direct, rtol=0, atol=1e-6 * direct.max())
-        assert np.abs(direct - base).max() > 1e-3 * base.max()  # the mirror is not trivial
-    assert len(list((tmp_path / "psf").glob("*.npy"))) == 1

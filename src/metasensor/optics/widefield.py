@@ -21,16 +21,15 @@ from metasensor.config import SystemConfig, say_fallbacks
 from metasensor.optics import cache as _cache
 from metasensor.optics.coherent import binned_intensity_mft, plan_field, point_field, pupil_samples
 from metasensor.optics.psf import (
-    PSF_CODE_VERSION,
     _bin,
     _crop,
     _ray_reach,
     _reference_pupil,
     _window_size,
+    mirrored_lookup,
 )
 from metasensor.optics.psf_args import check_config, check_depth, check_odd, check_zernike
 from metasensor.optics.pupil import PupilFn
-from metasensor.optics.symmetry import SYMMETRIES, mirror_pupil, unmirror_bank
 
 __all__ = ["widefield_psf", "WIDEFIELD_FFT_BYTES"]
 
@@ -67,17 +66,10 @@ def widefield_psf(cfg: SystemConfig, zernike=None, depth: float = 0.0, sampling=
     folder = None if cache is True or cache is False else Path(cache)
     key = None
     if cache is not False:
-        def key_of(g):
-            return _cache.cache_key(PSF_CODE_VERSION, "widefield_psf", cfg.optical_digest(),
-                                    mirror_pupil(a_ref, g).astype(np.float32),
-                                    mirror_pupil(w_ref, g).astype(np.float32), depth,
-                                    float(sampling), size)
-
-        key = key_of(SYMMETRIES[0])
-        index, hit = _cache.load_first((key if i == 0 else key_of(g)
-                                        for i, g in enumerate(SYMMETRIES)), folder)
-        if hit is not None:  # this pupil's PSF, or a mirror image's (optics/symmetry.py)
-            return unmirror_bank(hit[None, None], SYMMETRIES[index])[0, 0] if index else hit
+        key, hit = mirrored_lookup("widefield_psf", cfg, a_ref, w_ref, folder, depth,
+                                   float(sampling), size)
+        if hit is not None:
+            return hit
     cpu0 = time.process_time()
     out = _widefield(cfg, z, depth, phase, amplitude, sampling, size, gmax, dev)
     if key is not None:
