@@ -100,6 +100,7 @@ def _capture_tiles(out: Path, s: GigapixelSettings, layout, lens, cfg, big, marg
     Returns (true positions, meta tile paths, 2D tile paths, the photon scale)."""
     import metasensor as ms
     from metasensor.optics.cache import stats
+    from metasensor.recon.parallel import local_workers
 
     o = cfg.field_offset_px
     fz_lens = lens.field_zernike(cfg, (s.field_px, s.field_px))
@@ -123,7 +124,8 @@ def _capture_tiles(out: Path, s: GigapixelSettings, layout, lens, cfg, big, marg
         views = ms.realign(cap.frames, cap.config, cap.scan_order)
         rec = ms.reconstruct(views, cap.config, blocks=s.blocks, iterations=s.iterations,
                              field_zernike=layout.tile_field_zernike(fz_lens, k),
-                             space_variant=s.space_variant and s.iterations is None)
+                             space_variant=s.space_variant and s.iterations is None,
+                             num_workers=local_workers(s.blocks[0] * s.blocks[1]))
         c2, b2 = time.process_time(), stats["compute_seconds"]
         for name, value in (("simulation PSF banks", b1 - b0),
                             ("simulation, rest", c1 - c0 - (b1 - b0)),
