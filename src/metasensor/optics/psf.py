@@ -61,9 +61,9 @@ from metasensor.optics.coherent import (
 )
 from metasensor.optics.psf_args import check_config, check_depth, check_odd, check_zernike
 from metasensor.optics.pupil import PupilFn, disk_fraction, pupil_amplitude, pupil_phase
-from metasensor.optics.symmetry import SYMMETRIES, mirror_pupil, unmirror_bank
+from metasensor.optics.symmetry import mirrored_lookup
 
-__all__ = ["view_psfs", "mirrored_lookup", "PSF_CODE_VERSION", "ENERGY_CUT"]
+__all__ = ["view_psfs", "PSF_CODE_VERSION", "ENERGY_CUT"]
 
 PSF_CODE_VERSION = "psf-1"
 ENERGY_CUT = 0.005  # default windows keep >= 99.5 % of the energy
@@ -145,46 +145,6 @@ def _check_points(cfg: SystemConfig, points, sub: int) -> int:
 
 
 # ----------------------------------------------------------------------------- view PSFs
-def mirrored_lookup(name: str, cfg: SystemConfig, a_ref: np.ndarray, w_ref: np.ndarray,
-                    folder, *parts) -> tuple[str, np.ndarray | None]:
-    """The PSF cache's key of a pupil's result, and that result from the cache: its own, or a
-    mirror image's undone (:mod:`metasensor.optics.symmetry`), or None on a miss.
-
-    Parameters
-    ----------
-    name : str
-        The computation (``"view_psfs"``, ``"widefield_psf"``).
-    cfg : SystemConfig
-    a_ref, w_ref : numpy.ndarray
-        The pupil's amplitude and wavefront [waves] on the reference grid
-        (:func:`_reference_pupil`).
-    folder : path or None
-        The cache folder (None: the default one).
-    *parts
-        The computation's other settings, hashed into the key.
-
-    Returns
-    -------
-    (str, numpy.ndarray or None)
-        The pupil's own key (to store a computed result under) and the cached result: a bank
-        ``(n, n, K, K)`` or a 2D PSF ``(K, K)``. The mirror images' keys are hashed only after
-        the pupil's own key missed.
-    """
-    def key_of(g):
-        return _cache.cache_key(PSF_CODE_VERSION, name, cfg.optical_digest(),
-                                mirror_pupil(a_ref, g).astype(np.float32),
-                                mirror_pupil(w_ref, g).astype(np.float32), *parts)
-
-    key = key_of(SYMMETRIES[0])
-    index, hit = _cache.load_first((key if i == 0 else key_of(g)
-                                    for i, g in enumerate(SYMMETRIES)), folder)
-    if hit is None or not index:
-        return key, hit
-    if hit.ndim == 2:  # one 2D PSF: the image mirrors alone
-        return key, unmirror_bank(hit[None, None], SYMMETRIES[index])[0, 0]
-    return key, unmirror_bank(hit, SYMMETRIES[index])
-
-
 def view_psfs(cfg: SystemConfig, zernike=None, depth: float = 0.0, *,
               phase: PupilFn | None = None, amplitude=None, subsample: int = 1,
               size: int | None = None, device=None, cache=True,
@@ -243,9 +203,10 @@ def view_psfs(cfg: SystemConfig, zernike=None, depth: float = 0.0, *,
     folder = None if cache is True or cache is False else Path(cache)
     key = None
     if cache is not False:
-        key, hit = mirrored_lookup("view_psfs", cfg, a_ref, w_ref, folder, depth, sub, size, os_,
-                                   *(() if points is None else ("points", npts)),
-                                   *(("band",) if band_limited else ()))
+        key, hit = mirrored_lookup((PSF_CODE_VERSION, "view_psfs", cfg.optical_digest()),
+                                   a_ref, w_ref, (depth, sub, size, os_,
+                                                  *(() if points is None else ("points", npts)),
+                                                  *(("band",) if band_limited else ())), folder)
         if hit is not None:
             return hit
 

@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["Symmetry", "SYMMETRIES", "mirror_pupil", "unmirror_bank"]
+__all__ = ["Symmetry", "SYMMETRIES", "mirror_pupil", "mirrored_lookup", "unmirror_bank"]
 
 
 Symmetry = tuple[bool, bool, bool]
@@ -75,3 +75,43 @@ def unmirror_bank(bank: np.ndarray, g: Symmetry) -> np.ndarray:
     ys = slice(None, None, -1 if flip_y else 1)
     xs = slice(None, None, -1 if flip_x else 1)
     return np.ascontiguousarray(out[ys, xs, ys, xs])
+
+
+def mirrored_lookup(head: tuple, a_ref: np.ndarray, w_ref: np.ndarray, tail: tuple,
+                    folder=None) -> tuple[str, np.ndarray | None]:
+    """The PSF cache's key of a pupil's result, and that result from the cache: its own, or a
+    mirror image's undone, or None on a miss (:mod:`metasensor.optics.cache`).
+
+    Parameters
+    ----------
+    head : tuple
+        Key parts before the pupil (code version, computation, optical digest).
+    a_ref, w_ref : numpy.ndarray
+        The pupil's amplitude and wavefront [waves] on the cache's reference grid (symmetric
+        about its centre), hashed as float32.
+    tail : tuple
+        Key parts after the pupil (the computation's other settings).
+    folder : pathlib.Path or None
+        The cache folder (None: the default one).
+
+    Returns
+    -------
+    (str, numpy.ndarray or None)
+        The pupil's own key (to store a computed result under), and the cached bank
+        ``(n, n, K, K)`` or 2D PSF ``(K, K)``. The mirror images' keys are hashed only after
+        the pupil's own key missed.
+    """
+    from metasensor.optics import cache
+
+    def key_of(g):
+        return cache.cache_key(*head, mirror_pupil(a_ref, g).astype(np.float32),
+                               mirror_pupil(w_ref, g).astype(np.float32), *tail)
+
+    key = key_of(SYMMETRIES[0])
+    index, hit = cache.load_first((key if i == 0 else key_of(g)
+                                   for i, g in enumerate(SYMMETRIES)), folder)
+    if hit is None or not index:
+        return key, hit
+    if hit.ndim == 2:  # one 2D PSF: the image mirrors alone
+        return key, unmirror_bank(hit[None, None], SYMMETRIES[index])[0, 0]
+    return key, unmirror_bank(hit, SYMMETRIES[index])

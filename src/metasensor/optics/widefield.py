@@ -21,15 +21,16 @@ from metasensor.config import SystemConfig, say_fallbacks
 from metasensor.optics import cache as _cache
 from metasensor.optics.coherent import binned_intensity_mft, plan_field, point_field, pupil_samples
 from metasensor.optics.psf import (
+    PSF_CODE_VERSION,
     _bin,
     _crop,
     _ray_reach,
     _reference_pupil,
     _window_size,
-    mirrored_lookup,
 )
 from metasensor.optics.psf_args import check_config, check_depth, check_odd, check_zernike
 from metasensor.optics.pupil import PupilFn
+from metasensor.optics.symmetry import mirrored_lookup
 
 __all__ = ["widefield_psf", "WIDEFIELD_FFT_BYTES"]
 
@@ -66,8 +67,8 @@ def widefield_psf(cfg: SystemConfig, zernike=None, depth: float = 0.0, sampling=
     folder = None if cache is True or cache is False else Path(cache)
     key = None
     if cache is not False:
-        key, hit = mirrored_lookup("widefield_psf", cfg, a_ref, w_ref, folder, depth,
-                                   float(sampling), size)
+        key, hit = mirrored_lookup((PSF_CODE_VERSION, "widefield_psf", cfg.optical_digest()),
+                                   a_ref, w_ref, (depth, float(sampling), size), folder)
         if hit is not None:
             return hit
     cpu0 = time.process_time()
