@@ -1,4 +1,5 @@
-"""On-disk cache of PSF banks, keyed by a SHA-256 of everything a bank depends on.
+"""On-disk cache of PSF banks (and of the 2D sensor's PSFs), keyed by a SHA-256 of everything
+a bank depends on.
 
 Location: the environment variable ``METASENSOR_CACHE`` if set, else the folder given to
 :func:`set_cache_dir`, else the platform's user cache folder (``platformdirs``:

@@ -19,9 +19,8 @@ __all__ = ["local_workers", "run_tasks"]
 
 def local_workers(n_tasks: int, device=None) -> int:
     """Blocks to run at once in this process for ``n_tasks`` blocks on ``device``: one per
-    torch thread on the CPU (each block then runs on one thread: the banks' products stream
-    memory on one core each, so two blocks on two cores run nearly twice as fast as one block
-    on both), one on CUDA (one device)."""
+    torch thread on the CPU (each block then runs on one thread, :func:`run_tasks`), one on
+    CUDA (one device). Why one thread per block on the CPU: docs/decisions.md."""
     import torch
 
     from metasensor.backend import resolve_device

@@ -105,25 +105,14 @@ def time_weights(t: int, n_frames: int, every: int) -> list[tuple[int, float]]:
 
 def prefetch_kernels(comps, kernel_of, device, progress=None) -> None:
     """Call ``kernel_of`` (a :class:`KernelBanks` method, which keeps what it computes) on every
-    component first, on one CPU thread per torch thread: the banks' wave-optics work and their
-    cache reads run mostly on one core each, so a field of banks takes about half the time on
-    two. On CUDA (one device) and for one component: nothing (they are computed on first use).
-    ``progress``: callable(n) advanced by one per component."""
-    comps = list(comps)
-    workers = min(torch.get_num_threads(), len(comps))
-    if torch.device(device).type != "cpu" or workers < 2:
-        return
-    from concurrent.futures import ThreadPoolExecutor
+    component first, as local block tasks (:func:`metasensor.recon.parallel.run_tasks`): on
+    the CPU one component per torch thread at once, each on one thread; on CUDA one after
+    another. ``progress``: callable(n) advanced by one per component."""
+    from metasensor.recon.parallel import local_workers, run_tasks
 
-    total = torch.get_num_threads()
-    torch.set_num_threads(1)  # intra-op threads are process-wide: one per worker
-    try:
-        with ThreadPoolExecutor(max_workers=workers) as pool:
-            for _ in pool.map(kernel_of, comps):
-                if progress is not None:
-                    progress(1)
-    finally:
-        torch.set_num_threads(total)
+    comps = list(comps)
+    run_tasks(kernel_of, comps, lambda _kernel: None, scheduler="threads",
+              num_workers=local_workers(len(comps), device), progress=progress)
 
 
 def accumulate(image: np.ndarray, comps, kernel_of, rows: Lattice, cols: Lattice,
