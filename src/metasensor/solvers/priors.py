@@ -120,8 +120,8 @@ class HyperLaplacian:
     axes).
 
     ``prox`` is exact for alpha = 1 (soft threshold) and tabulated for 2/3 (the lookup table of
-    :func:`metasensor.solvers.hyper_laplacian.solve_w_table`, one table per gradient component
-    of every image of a batch ``(2, ..., H, W)``, so a batch gives its images' own results).
+    :func:`metasensor.solvers.hyper_laplacian.solve_w_table`, element-wise, so each image of a
+    batch ``(2, ..., H, W)`` gets its own result).
     The isotropic prox is the scalar one applied to the magnitude ``|z(p)|`` with ``z(p)``'s
     direction kept (the minimiser of a radial penalty plus ``½‖w − z‖²`` lies along ``z``).
     """
@@ -140,15 +140,9 @@ class HyperLaplacian:
     def prox(self, z: torch.Tensor, weight: float) -> torch.Tensor:
         beta = 1.0 / float(weight)
         if not self.isotropic:
-            flat = z.reshape(-1, *z.shape[-2:])
-            return torch.stack([solve_w_table(c, beta, self.alpha)
-                                for c in flat]).reshape(z.shape)
+            return solve_w_table(z, beta, self.alpha)
         if z.shape[0] != 2:
             raise ValueError(f"the isotropic prox needs gradients (2, ..., H, W), got {z.shape}")
-        pairs = z.reshape(2, -1, *z.shape[-2:])
-        out = torch.empty_like(pairs)
-        for b in range(pairs.shape[1]):
-            rho = torch.sqrt(pairs[0, b] ** 2 + pairs[1, b] ** 2)
-            scale = solve_w_table(rho, beta, self.alpha) / rho.clamp_min(1e-30)
-            out[:, b] = pairs[:, b] * scale
-        return out.reshape(z.shape)
+        rho = torch.sqrt(z[0] ** 2 + z[1] ** 2)
+        scale = solve_w_table(rho, beta, self.alpha).div_(rho.clamp_min(1e-30))
+        return z * scale
