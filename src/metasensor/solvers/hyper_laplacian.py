@@ -131,7 +131,7 @@ def solve_w_table(v: torch.Tensor, beta: float, alpha: float = 2.0 / 3.0) -> tor
     table = _unit_table(str(v.device), v.dtype)
     s = v.abs().mul_(scale)
     pos = s.clamp(max=UNIT_TABLE_MAX).mul_(1.0 / UNIT_TABLE_STEP)
-    i0 = pos.long().clamp_(max=table.numel() - 2)
+    i0 = pos.long().clamp_(0, table.numel() - 2)
     frac = pos.sub_(i0)
     lo = table[i0]
     w = torch.lerp(lo, table[i0 + 1], frac)
