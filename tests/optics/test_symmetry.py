@@ -100,3 +100,43 @@ def test_cache_serves_the_mirror_images_of_a_widefield_psf(tmp_path):
     base = _check_mirrors_served(
         lambda phase, cache: widefield_psf(cfg, phase=phase, size=15, cache=cache), tmp_path)
     assert base.shape == (15, 15)
+
+
+def test_threads_asking_for_one_mirror_orbit_compute_it_once(tmp_path, monkeypatch):
+    """Two threads asking at once for a bank and its mirror image (the simulator's kernel
+    prefetch does) compute one bank: one miss and one hit, one file, both results equal to
+    their direct computations to 1e-6 of the maximum. The computation is slowed so that the
+    second request arrives while the first is computing."""
+    import threading
+    import time
+
+    from metasensor.optics import psf
+
+    cfg = SystemConfig(nnum=3, mla_pitch=3 * 4.6e-6, mla_focal=3 * 46e-6, scan=3)
+    computed, slow = [], psf._view_bank
+
+    def counted(*args, **kwargs):
+        computed.append(threading.get_ident())
+        time.sleep(0.5)
+        return slow(*args, **kwargs)
+
+    monkeypatch.setattr(psf, "_view_bank", counted)
+    hits, misses = psf_cache.stats["hits"], psf_cache.stats["misses"]
+    phases = [_phase, _mirrored(SYMMETRIES[3])]
+    out = [None, None]
+
+    def ask(i):
+        out[i] = view_psfs(cfg, phase=phases[i], size=9, cache=tmp_path)
+
+    workers = [threading.Thread(target=ask, args=(i,)) for i in range(2)]
+    for w in workers:
+        w.start()
+    for w in workers:
+        w.join()
+    assert len(computed) == 1
+    assert (psf_cache.stats["hits"] - hits, psf_cache.stats["misses"] - misses) == (1, 1)
+    assert len(list((tmp_path / "psf").glob("*.npy"))) == 1
+    monkeypatch.setattr(psf, "_view_bank", slow)
+    for phase, got in zip(phases, out, strict=True):
+        direct = view_psfs(cfg, phase=phase, size=9, cache=False)
+        np.testing.assert_allclose(got, direct, rtol=0, atol=1e-6 * direct.max())

@@ -122,17 +122,18 @@ def load(key: str, folder: Path | None = None) -> np.ndarray | None:
     return load_first([key], folder)[1]
 
 
-def load_first(keys, folder: Path | None = None) -> tuple[int | None, np.ndarray | None]:
+def load_first(keys, folder: Path | None = None, count: bool = True
+               ) -> tuple[int | None, np.ndarray | None]:
     """The first of ``keys`` (any iterable, consumed in order until a hit) that is cached:
     ``(its index, the array)``, or ``(None, None)``. Counts one hit or one miss in
-    :data:`stats`, however many keys were tried."""
+    :data:`stats`, however many keys were tried (``count`` False: none)."""
     max_bytes()  # a bad size setting is reported before the work, not after it
     for index, key in enumerate(keys):
         arr = _load_one(key, folder)
         if arr is not None:
-            stats["hits"] += 1
+            stats["hits"] += count
             return index, arr
-    stats["misses"] += 1
+    stats["misses"] += count
     return None, None
 
 

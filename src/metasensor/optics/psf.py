@@ -36,14 +36,12 @@ its aperture)``, less the light outside the window.
 from __future__ import annotations
 
 import math
-import time
 from pathlib import Path
 
 import numpy as np
 
 from metasensor.backend import check_memory, resolve_device
 from metasensor.config import SystemConfig, say_fallbacks
-from metasensor.optics import cache as _cache
 from metasensor.optics.bank import (  # noqa: F401  (the engine's helpers, importable here too)
     _batch_size,
     _bin,
@@ -61,7 +59,7 @@ from metasensor.optics.coherent import (
 )
 from metasensor.optics.psf_args import check_config, check_depth, check_odd, check_zernike
 from metasensor.optics.pupil import PupilFn, disk_fraction, pupil_amplitude, pupil_phase
-from metasensor.optics.symmetry import mirrored_lookup
+from metasensor.optics.symmetry import cached_mirrored
 
 __all__ = ["view_psfs", "PSF_CODE_VERSION", "ENERGY_CUT"]
 
@@ -198,33 +196,31 @@ def view_psfs(cfg: SystemConfig, zernike=None, depth: float = 0.0, *,
     z, depth, sub, size, npts, os_ = _checked_settings(cfg, zernike, depth, subsample, size,
                                                        points, oversample, band_limited)
     dev = resolve_device(device)
-    dx = cfg.pixel_pitch / os_
     a_ref, w_ref, gmax = _reference_pupil(cfg, z, depth, phase, amplitude)
-    folder = None if cache is True or cache is False else Path(cache)
-    key = None
-    if cache is not False:
-        key, hit = mirrored_lookup((PSF_CODE_VERSION, "view_psfs", cfg.optical_digest()),
-                                   a_ref, w_ref, (depth, sub, size, os_,
-                                                  *(() if points is None else ("points", npts)),
-                                                  *(("band",) if band_limited else ())), folder)
-        if hit is not None:
-            return hit
+    if cache is False:
+        return _view_bank(cfg, z, depth, phase, amplitude, gmax, size, npts, sub, os_,
+                          points is not None, band_limited, dev)
+    return cached_mirrored(
+        (PSF_CODE_VERSION, "view_psfs", cfg.optical_digest()), a_ref, w_ref,
+        (depth, sub, size, os_, *(() if points is None else ("points", npts)),
+         *(("band",) if band_limited else ())), None if cache is True else Path(cache),
+        lambda: _view_bank(cfg, z, depth, phase, amplitude, gmax, size, npts, sub, os_,
+                           points is not None, band_limited, dev))
 
-    cpu0 = time.process_time()
+
+def _view_bank(cfg, z, depth, phase, amplitude, gmax, size, npts, sub, os_, pointed,
+               band_limited, dev) -> np.ndarray:
+    """:func:`view_psfs`'s computation (its settings checked and completed)."""
+    dx = cfg.pixel_pitch / os_
     grid = npts / (cfg.nnum * sub)  # output samples per pixel/subsample (1 unless ``points``)
-    size = _bank_size(cfg, z, depth, phase, amplitude, gmax, size, grid, sub, os_,
-                      points is not None, dev)
+    size = _bank_size(cfg, z, depth, phase, amplitude, gmax, size, grid, sub, os_, pointed, dev)
     lenslets, n = _grid(cfg, math.ceil(size / grid) | 1, os_)
     _check_field_grid(cfg, lenslets, n, os_)
     plan = plan_field(cfg, n, dx, gmax)
     a, w, norm = pupil_samples(cfg, plan, z, depth, phase, amplitude)
     u0 = point_field(cfg, plan, a, w, norm, n, dx, dev)
-    out = _simulate_bank(cfg, u0, os_, npts, lenslets, size * sub if points is None else size,
-                         dev, band_limited)
-    if key is not None:
-        _cache.stats["compute_seconds"] += time.process_time() - cpu0
-        _cache.store(key, out, folder)
-    return out
+    return _simulate_bank(cfg, u0, os_, npts, lenslets, size * sub if not pointed else size,
+                          dev, band_limited)
 
 
 def _checked_settings(cfg: SystemConfig, zernike, depth, subsample, size, points, oversample,

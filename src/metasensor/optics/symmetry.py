@@ -19,9 +19,13 @@ Hand-written: a bookkeeping of array flips, tested against directly computed ban
 
 from __future__ import annotations
 
+import threading
+import time
+
 import numpy as np
 
-__all__ = ["Symmetry", "SYMMETRIES", "mirror_pupil", "mirrored_lookup", "unmirror_bank"]
+__all__ = ["Symmetry", "SYMMETRIES", "cached_mirrored", "mirror_pupil", "mirrored_lookup",
+           "unmirror_bank"]
 
 
 Symmetry = tuple[bool, bool, bool]
@@ -78,7 +82,7 @@ def unmirror_bank(bank: np.ndarray, g: Symmetry) -> np.ndarray:
 
 
 def mirrored_lookup(head: tuple, a_ref: np.ndarray, w_ref: np.ndarray, tail: tuple,
-                    folder=None) -> tuple[str, np.ndarray | None]:
+                    folder=None, count: bool = True) -> tuple[str, np.ndarray | None]:
     """The PSF cache's key of a pupil's result, and that result from the cache: its own, or a
     mirror image's undone, or None on a miss (:mod:`metasensor.optics.cache`).
 
@@ -93,6 +97,8 @@ def mirrored_lookup(head: tuple, a_ref: np.ndarray, w_ref: np.ndarray, tail: tup
         Key parts after the pupil (the computation's other settings).
     folder : pathlib.Path or None
         The cache folder (None: the default one).
+    count : bool
+        Count the lookup's hit or miss in the cache's ``stats``.
 
     Returns
     -------
@@ -109,9 +115,61 @@ def mirrored_lookup(head: tuple, a_ref: np.ndarray, w_ref: np.ndarray, tail: tup
 
     key = key_of(SYMMETRIES[0])
     index, hit = cache.load_first((key if i == 0 else key_of(g)
-                                   for i, g in enumerate(SYMMETRIES)), folder)
+                                   for i, g in enumerate(SYMMETRIES)), folder, count)
     if hit is None or not index:
         return key, hit
     if hit.ndim == 2:  # one 2D PSF: the image mirrors alone
         return key, unmirror_bank(hit[None, None], SYMMETRIES[index])[0, 0]
     return key, unmirror_bank(hit, SYMMETRIES[index])
+
+
+_ORBIT_LOCKS: dict[str, threading.Lock] = {}
+_ORBIT_LOCKS_GUARD = threading.Lock()
+
+
+def _orbit_lock(head: tuple, a_ref: np.ndarray, w_ref: np.ndarray, tail: tuple
+                ) -> threading.Lock:
+    """This process's lock of the pupil's mirror orbit (named by the least of its eight keys)."""
+    from metasensor.optics import cache
+
+    name = min(cache.cache_key(*head, mirror_pupil(a_ref, g).astype(np.float32),
+                               mirror_pupil(w_ref, g).astype(np.float32), *tail)
+               for g in SYMMETRIES)
+    with _ORBIT_LOCKS_GUARD:
+        return _ORBIT_LOCKS.setdefault(name, threading.Lock())
+
+
+def cached_mirrored(head: tuple, a_ref: np.ndarray, w_ref: np.ndarray, tail: tuple,
+                    folder, compute) -> np.ndarray:
+    """A pupil's bank (or 2D PSF) from the PSF cache (:func:`mirrored_lookup`), else
+    ``compute()``'d and stored under the pupil's key; threads of one process asking for members
+    of one mirror orbit at once compute it once (the others wait, then read the cache).
+
+    Parameters
+    ----------
+    head, a_ref, w_ref, tail, folder
+        As :func:`mirrored_lookup`.
+    compute : callable
+        ``compute() -> numpy.ndarray``, the result for this pupil (its CPU seconds are added to
+        the cache's ``stats["compute_seconds"]``).
+
+    Returns
+    -------
+    numpy.ndarray
+        The bank ``(n, n, K, K)`` or 2D PSF ``(K, K)``. One hit or one miss is counted.
+    """
+    from metasensor.optics import cache
+
+    _, hit = mirrored_lookup(head, a_ref, w_ref, tail, folder, count=False)
+    if hit is None:
+        with _orbit_lock(head, a_ref, w_ref, tail):
+            key, hit = mirrored_lookup(head, a_ref, w_ref, tail, folder, count=False)
+            if hit is None:  # no other thread stored a member meanwhile
+                cache.stats["misses"] += 1
+                cpu0 = time.process_time()
+                out = compute()
+                cache.stats["compute_seconds"] += time.process_time() - cpu0
+                cache.store(key, out, folder)
+                return out
+    cache.stats["hits"] += 1
+    return hit

@@ -10,7 +10,6 @@ integrated over pixels of the given side.
 from __future__ import annotations
 
 import math
-import time
 from pathlib import Path
 
 import numpy as np
@@ -18,7 +17,6 @@ import torch
 
 from metasensor.backend import resolve_device
 from metasensor.config import SystemConfig, say_fallbacks
-from metasensor.optics import cache as _cache
 from metasensor.optics.coherent import binned_intensity_mft, plan_field, point_field, pupil_samples
 from metasensor.optics.psf import (
     PSF_CODE_VERSION,
@@ -30,7 +28,7 @@ from metasensor.optics.psf import (
 )
 from metasensor.optics.psf_args import check_config, check_depth, check_odd, check_zernike
 from metasensor.optics.pupil import PupilFn
-from metasensor.optics.symmetry import mirrored_lookup
+from metasensor.optics.symmetry import cached_mirrored
 
 __all__ = ["widefield_psf", "WIDEFIELD_FFT_BYTES"]
 
@@ -64,19 +62,13 @@ def widefield_psf(cfg: SystemConfig, zernike=None, depth: float = 0.0, sampling=
         raise ValueError(f"sampling must be a positive pixel size in metres, got {sampling!r}")
     dev = resolve_device(device)
     a_ref, w_ref, gmax = _reference_pupil(cfg, z, depth, phase, amplitude)
-    folder = None if cache is True or cache is False else Path(cache)
-    key = None
-    if cache is not False:
-        key, hit = mirrored_lookup((PSF_CODE_VERSION, "widefield_psf", cfg.optical_digest()),
-                                   a_ref, w_ref, (depth, float(sampling), size), folder)
-        if hit is not None:
-            return hit
-    cpu0 = time.process_time()
-    out = _widefield(cfg, z, depth, phase, amplitude, sampling, size, gmax, dev)
-    if key is not None:
-        _cache.stats["compute_seconds"] += time.process_time() - cpu0
-        _cache.store(key, out, folder)
-    return out
+    if cache is False:
+        return _widefield(cfg, z, depth, phase, amplitude, sampling, size, gmax, dev)
+    return cached_mirrored((PSF_CODE_VERSION, "widefield_psf", cfg.optical_digest()), a_ref,
+                           w_ref, (depth, float(sampling), size),
+                           None if cache is True else Path(cache),
+                           lambda: _widefield(cfg, z, depth, phase, amplitude, sampling, size,
+                                              gmax, dev))
 
 
 def _widefield(cfg, z, depth, phase, amplitude, sampling, size, gmax, dev) -> np.ndarray:
