@@ -12,6 +12,10 @@ import torch
 from metasensor.depth.cost import _half_members, _sectors
 from metasensor.depth.filters import GuidedFilter, box_mean
 
+OCCLUDED_RATIO = 0.5
+"""A half-pupil refines a pixel only where its window-aggregated variance is below this share
+of the full pupil's."""
+
 __all__ = ["subpixel_minimum", "peak_ratio_confidence", "gauss_newton_refine",
            "fill_low_confidence"]
 
@@ -81,8 +85,13 @@ def gauss_newton_refine(views: torch.Tensor, au, av, disparity: torch.Tensor,
     interpolation errs only in amplitude, symmetrically in the fractional shift, so the errors of
     the views at ``±a`` cancel in the normal equations; torch's bicubic (Keys, a = −0.75) is only
     first-order accurate in position, a bias the normal equations keep.
-    With ``occlusion`` each pixel uses the view group (full pupil or one of the four
-    half-pupils) whose aligned views agree best, as the cost volume does. The total change is
+    With ``occlusion`` a pixel uses one of the four half-pupils only where the views disagree
+    across the full pupil: the half whose aggregated variance is the least, if that is below
+    ``OCCLUDED_RATIO`` times the full pupil's (an occluder seen by the other half), else the
+    full pupil. A half-pupil's views all lie on one side of the centre, so its fit errs more
+    (half the views; on a slanted surface it reads the disparity where its mean view offset
+    looks, and its views' interpolation errors do not cancel in ± pairs); chosen wherever its
+    raw variance happened to be the least, noise picked it at most pixels. The total change is
     clipped to ``±max_change`` view px around the input (the plane sweep decides the basin);
     pixels where the normal matrix vanishes (no texture) keep their value.
     """
@@ -118,20 +127,20 @@ def gauss_newton_refine(views: torch.Tensor, au, av, disparity: torch.Tensor,
             gv = smp[:, 1] * au_t[sl, None, None] + smp[:, 2] * av_t[sl, None, None]
             terms = torch.stack([wv, gv, wv * wv, gv * wv, gv * gv], dim=0)  # (5, m, H, W)
             sums.index_add_(1, sector[sl], terms)
-        best_var = None
+        best_var = full_var = None
         num = torch.zeros((h, w), dtype=torch.float32, device=dev)
         den = torch.zeros((h, w), dtype=torch.float32, device=dev)
         for members in groups:
             m = float(count[members].sum())
             s_w, s_g, s_ww, s_gw, s_gg = sums[:, members].sum(1)
-            var = s_ww - s_w * s_w / m
+            var = aggregate((s_ww - s_w * s_w / m) / m)
             g_num = (s_gw - s_g * s_w / m) / m
             g_den = (s_gg - s_g * s_g / m) / m
             if best_var is None:
-                best_var, num, den = var / m, g_num, g_den
+                best_var, full_var, num, den = var, var, g_num, g_den
             else:
-                better = var / m < best_var
-                best_var = torch.where(better, var / m, best_var)
+                better = (var < best_var) & (var < OCCLUDED_RATIO * full_var)
+                best_var = torch.where(better, var, best_var)
                 num = torch.where(better, g_num, num)
                 den = torch.where(better, g_den, den)
         num = aggregate(num)
