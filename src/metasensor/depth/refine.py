@@ -88,10 +88,11 @@ def gauss_newton_refine(views: torch.Tensor, au, av, disparity: torch.Tensor,
     With ``occlusion`` a pixel uses one of the four half-pupils only where the views disagree
     across the full pupil: the half whose aggregated variance is the least, if that is below
     ``OCCLUDED_RATIO`` times the full pupil's (an occluder seen by the other half), else the
-    full pupil. A half-pupil's views all lie on one side of the centre, so its fit errs more
-    (half the views; on a slanted surface it reads the disparity where its mean view offset
-    looks, and its views' interpolation errors do not cancel in ± pairs); chosen wherever its
-    raw variance happened to be the least, noise picked it at most pixels. The total change is
+    full pupil; decided once, at the input disparities. A half-pupil's views all lie on one
+    side of the centre, so its fit errs more (half the views; on a slanted surface it reads the
+    disparity where its mean view offset looks, and its views' interpolation errors do not
+    cancel in ± pairs); chosen wherever its raw variance happened to be the least, noise
+    picked it at most pixels. The total change is
     clipped to ``±max_change`` view px around the input (the plane sweep decides the basin);
     pixels where the normal matrix vanishes (no texture) keep their value.
     """
@@ -112,6 +113,7 @@ def gauss_newton_refine(views: torch.Tensor, au, av, disparity: torch.Tensor,
     ys, xs = _grid(h, w, dev)
     d0 = disparity.clone().to(torch.float32)
     d = d0.clone()
+    choice = None
     for _ in range(int(iterations)):
         # per-sector sums of W, g, W², gW, g²: (5, 9, H, W)
         sums = torch.zeros((5, 9, h, w), dtype=torch.float32, device=dev)
@@ -127,22 +129,9 @@ def gauss_newton_refine(views: torch.Tensor, au, av, disparity: torch.Tensor,
             gv = smp[:, 1] * au_t[sl, None, None] + smp[:, 2] * av_t[sl, None, None]
             terms = torch.stack([wv, gv, wv * wv, gv * wv, gv * gv], dim=0)  # (5, m, H, W)
             sums.index_add_(1, sector[sl], terms)
-        best_var = full_var = None
-        num = torch.zeros((h, w), dtype=torch.float32, device=dev)
-        den = torch.zeros((h, w), dtype=torch.float32, device=dev)
-        for members in groups:
-            m = float(count[members].sum())
-            s_w, s_g, s_ww, s_gw, s_gg = sums[:, members].sum(1)
-            var = aggregate((s_ww - s_w * s_w / m) / m)
-            g_num = (s_gw - s_g * s_w / m) / m
-            g_den = (s_gg - s_g * s_g / m) / m
-            if best_var is None:
-                best_var, full_var, num, den = var, var, g_num, g_den
-            else:
-                better = (var < best_var) & (var < OCCLUDED_RATIO * full_var)
-                best_var = torch.where(better, var, best_var)
-                num = torch.where(better, g_num, num)
-                den = torch.where(better, g_den, den)
+        if choice is None:  # decided once, at the sweep's disparities
+            choice = _pupil_choice(sums, groups, count, aggregate)
+        num, den = _normal_terms(sums, groups, count, choice)
         num = aggregate(num)
         den = aggregate(den)
         ok = den > 1e-12 * torch.clamp(den.abs().max(), min=1e-30)
@@ -150,6 +139,45 @@ def gauss_newton_refine(views: torch.Tensor, au, av, disparity: torch.Tensor,
                            torch.zeros_like(den))
         d = torch.clamp(d + step, d0 - max_change, d0 + max_change)
     return d
+
+
+def _group_moments(sums: torch.Tensor, members: list[int], count: np.ndarray):
+    """A view group's variance of the aligned views, and its normal-equation numerator and
+    denominator ``(Σ(g − ḡ)(W − W̄), Σ(g − ḡ)²) / m``, from the per-sector sums."""
+    m = float(count[members].sum())
+    s_w, s_g, s_ww, s_gw, s_gg = sums[:, members].sum(1)
+    return ((s_ww - s_w * s_w / m) / m, (s_gw - s_g * s_w / m) / m,
+            (s_gg - s_g * s_g / m) / m)
+
+
+def _pupil_choice(sums: torch.Tensor, groups: list, count: np.ndarray,
+                  aggregate) -> torch.Tensor:
+    """Per pixel, the index into ``groups`` (0: the full pupil) of the view group to refine
+    with: the half-pupil of least aggregated variance where that is below ``OCCLUDED_RATIO``
+    times the full pupil's, else the full pupil."""
+    full = aggregate(_group_moments(sums, groups[0], count)[0])
+    best = full
+    choice = torch.zeros(full.shape, dtype=torch.long, device=full.device)
+    for k, members in enumerate(groups[1:], start=1):
+        var = aggregate(_group_moments(sums, members, count)[0])
+        better = (var < best) & (var < OCCLUDED_RATIO * full)
+        best = torch.where(better, var, best)
+        choice = torch.where(better, torch.full_like(choice, k), choice)
+    return choice
+
+
+def _normal_terms(sums: torch.Tensor, groups: list, count: np.ndarray,
+                  choice: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """The normal equations' numerator and denominator of each pixel's chosen view group."""
+    num = den = None
+    for k, members in enumerate(groups):
+        _, g_num, g_den = _group_moments(sums, members, count)
+        if num is None:
+            num, den = g_num, g_den
+        else:
+            num = torch.where(choice == k, g_num, num)
+            den = torch.where(choice == k, g_den, den)
+    return num, den
 
 
 def fill_low_confidence(disparity: torch.Tensor, confidence: torch.Tensor, guide: torch.Tensor,
