@@ -91,10 +91,9 @@ def gauss_newton_refine(views: torch.Tensor, au, av, disparity: torch.Tensor,
     full pupil; decided once, at the input disparities. A half-pupil's views all lie on one
     side of the centre, so its fit errs more (half the views; on a slanted surface it reads the
     disparity where its mean view offset looks, and its views' interpolation errors do not
-    cancel in ± pairs); chosen wherever its raw variance happened to be the least, noise
-    picked it at most pixels. The total change is
-    clipped to ``±max_change`` view px around the input (the plane sweep decides the basin);
-    pixels where the normal matrix vanishes (no texture) keep their value.
+    cancel in ± pairs). The total change is clipped to ``±max_change`` view px around the
+    input (the plane sweep decides the basin); pixels where the normal matrix vanishes (no
+    texture) keep their value.
     """
     n, h, w = views.shape
     dev = views.device
