@@ -78,3 +78,29 @@ def test_half_pupils_refine_only_where_the_full_pupil_disagrees():
                                   max_change=0.1, occlusion=occ)
         errs[occ] = float(np.sqrt(np.mean((out.numpy()[8:-8, 8:-8] - 0.43) ** 2)))
     assert errs[True] <= 1.05 * errs[False], errs
+
+
+def test_half_pupils_still_refine_beside_an_occluder():
+    """A textured box in front of a textured plane (5 x 5 views, noise-free): on the background
+    within 3 px of the box, where some views see the box, the occlusion-aware refinement stays
+    closer to the truth than the full pupil's (r.m.s. 0.030 against 0.040 view px here; equal
+    if half-pupils were never used)."""
+    from metasensor.depth.scenes import benchmark_scene
+
+    sv = benchmark_scene("planes", nnum=5, size=64, max_disparity=2.0, snr_db=None, seed=2)
+    views = torch.from_numpy(sv.views.reshape(25, 64, 64).astype(np.float32))
+    au, av = (a.ravel() for a in view_offsets(5))
+    truth = sv.disparity
+    start = torch.from_numpy(truth + 0.05)
+
+    def box(x):
+        return torch.from_numpy(ndimage.uniform_filter(x.numpy(), 5, mode="nearest"))
+
+    front = truth < truth.mean()
+    beside = ndimage.binary_dilation(front, iterations=3) & ~front
+    errs = {}
+    for occ in (False, True):
+        out = gauss_newton_refine(views, au, av, start, aggregate=box, iterations=3,
+                                  max_change=0.1, occlusion=occ).numpy()
+        errs[occ] = float(np.sqrt(np.mean((out[beside] - truth[beside]) ** 2)))
+    assert errs[True] < 0.9 * errs[False], errs
