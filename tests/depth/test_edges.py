@@ -75,8 +75,7 @@ def test_centre_weight_adds_the_squared_distance_to_the_centre_view():
 def test_noise_floor_lets_a_flat_patch_take_its_surroundings():
     """A flat disc painted on a slanted background (5 x 5 views, 30 dB, 128 px): with the
     floor at 2 x the median minimum cost, noise decided the disc's interior (MSE x 100 about
-    6 at this size). The learned edge refiner is left out of both runs: it re-decides the
-    disc's border, not its interior, and its fits differ by more than this test's margin."""
+    6 at this size)."""
     sv = benchmark_scene("textureless", nnum=5, size=128, max_disparity=3.0, snr_db=30.0,
                          seed=1)
     n = sv.config.nnum
@@ -85,7 +84,7 @@ def test_noise_floor_lets_a_flat_patch_take_its_surroundings():
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             res = ms.estimate_depth(sv.views, sv.config, view_mask=np.ones((n, n), bool),
-                                    smoothing=ms.depth.SemiGlobal(noise=noise), refiner=None)
+                                    smoothing=ms.depth.SemiGlobal(noise=noise))
         scores[noise] = _score(sv, res.disparity)
     low, default = scores[2.0], scores[ms.depth.SemiGlobal().noise]
     assert default["mse"] <= 0.5 * low["mse"] and default["badpix"] <= 0.1, (default, low)

@@ -48,7 +48,7 @@ class SemiGlobal:
     p1: float = 0.3
     p2: float = 0.5
     paths: int = 4
-    noise: float = 16.0
+    noise: float = 8.0
 
     def __post_init__(self) -> None:
         for name in ("p1", "p2", "noise"):
