@@ -202,10 +202,11 @@ def _hard_rows(size: int) -> list[dict]:
     return rows
 
 
-def _hard_seed_rows(size: int, seeds=(2, 3, 4)) -> list[dict]:
+def _hard_seed_rows(size: int, seeds=(2, 3, 5)) -> list[dict]:
     """The hard scenes again with other seeds (shapes, disparities, textures and noise drawn
     anew), default settings only: one seed's row can sit on either side of a line by chance
-    (a few edge pixels carry its MSE)."""
+    (a few edge pixels carry its MSE). Seed 4 is left out: the edge refiner's training set
+    holds the 9 x 9 occluders scene of that seed (at 96 px)."""
     from metasensor.depth.scenes import SCENES, benchmark_scene
 
     rows = []
