@@ -202,13 +202,15 @@ def _hard_rows(size: int) -> list[dict]:
     return rows
 
 
-def _hard_seed_rows(size: int, seeds=(2, 3, 5)) -> list[dict]:
-    """The hard scenes again with other seeds (shapes, disparities, textures and noise drawn
-    anew), default settings only: one seed's row can sit on either side of a line by chance
-    (a few edge pixels carry its MSE). Seed 4 is left out: the edge refiner's training set
-    holds the 9 x 9 occluders scene of that seed (at 96 px)."""
+def _hard_seed_rows(size: int, count: int = 3) -> list[dict]:
+    """The hard scenes again with ``count`` other seeds (shapes, disparities, textures and
+    noise drawn anew), default settings only: one seed's row can sit on either side of a line
+    by chance (a few edge pixels carry its MSE). The seeds are ones the edge refiner was not
+    trained on (``refiner_training.held_out_seeds``)."""
+    from metasensor.depth.refiner_training import held_out_seeds
     from metasensor.depth.scenes import SCENES, benchmark_scene
 
+    seeds = held_out_seeds(count)
     rows = []
     for n, snr in HARD_CASES:
         for kind in SCENES:

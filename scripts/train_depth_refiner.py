@@ -27,6 +27,7 @@ import torch  # noqa: E402
 from metasensor.depth.learned import WEIGHTS, EdgeEnsemble, save_refiner  # noqa: E402
 from metasensor.depth.refiner_training import (  # noqa: E402
     TRAINED_ON,
+    TRAINING_SCENES,
     render_spec,
     samples,
     scene_record,
@@ -56,7 +57,7 @@ def collect(scenes: int, seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--scenes", type=int, default=150)
+    parser.add_argument("--scenes", type=int, default=TRAINING_SCENES)
     parser.add_argument("--steps", type=int, default=8000)
     parser.add_argument("--width", type=int, default=32)
     parser.add_argument("--seed", type=int, default=0)

@@ -174,3 +174,18 @@ def test_photo_training_scenes_use_no_evaluation_photograph():
     assert np.ptp(a.disparity) > 1.0  # objects in front of the background
     sources = [s[0] for s in training_specs(6)]
     assert sorted(set(sources)) == ["occluders", "photo", "random", "thin"]
+
+
+def test_held_out_seeds_are_not_in_the_training_set():
+    """The benchmark's extra hard-scene seeds: no benchmark kind is trained at them (the
+    shipped weights' specs hold the 9 x 9 occluders scene of seed 4, so it is skipped)."""
+    from metasensor.depth.refiner_training import (
+        TRAINING_KINDS,
+        TRAINING_SCENES,
+        held_out_seeds,
+        training_specs,
+    )
+
+    seeds = held_out_seeds(3)
+    used = {s[4] for s in training_specs(TRAINING_SCENES) if s[0] in TRAINING_KINDS}
+    assert seeds == (2, 3, 5) and not set(seeds) & used and 4 in used

@@ -39,10 +39,12 @@ from metasensor.depth.scenes import _render_grid, benchmark_scene, random_ramp
 from metasensor.depth.synthetic import Layer, SyntheticViews, random_texture, render_views
 from metasensor.priors.deadleaves import dead_leaves
 
-__all__ = ["TRAINED_ON", "TRAINING_KINDS", "TRAINING_PHOTOS", "photo_scene", "scene_record",
-           "samples", "train", "training_scene", "training_specs", "validate"]
+__all__ = ["TRAINED_ON", "TRAINING_KINDS", "TRAINING_PHOTOS", "TRAINING_SCENES",
+           "held_out_seeds", "photo_scene", "scene_record", "samples", "train",
+           "training_scene", "training_specs", "validate"]
 
 TRAINING_KINDS = ("occluders", "thin", "mixed")
+TRAINING_SCENES = 150  # scenes of the shipped weights' training set (the script's default)
 # bundled scikit-image photographs (nothing downloaded), none of them in scenes.PHOTOS
 TRAINING_PHOTOS = ("grass", "coins", "moon", "hubble_deep_field", "immunohistochemistry",
                    "retina", "clock", "page")
@@ -152,6 +154,20 @@ def training_specs(scenes: int, seed: int = 0) -> list[tuple]:
         else:
             specs.append(("random", nnum, int(rng.choice((80, 96, 112))), snr, s))
     return specs
+
+
+def held_out_seeds(count: int, scenes: int = TRAINING_SCENES, seed: int = 0) -> tuple:
+    """The first ``count`` scene seeds >= 2 at which no benchmark kind enters
+    :func:`training_specs` ``(scenes, seed)``: seeds whose benchmark scenes
+    (:func:`metasensor.depth.scenes.benchmark_scene`) are held out from the refiner's training
+    at every size (seed 1 is the benchmark's own)."""
+    used = {spec[4] for spec in training_specs(scenes, seed) if spec[0] in TRAINING_KINDS}
+    out, s = [], 2
+    while len(out) < count:
+        if s not in used:
+            out.append(s)
+        s += 1
+    return tuple(out)
 
 
 def render_spec(spec) -> SyntheticViews:
