@@ -246,7 +246,7 @@ def summary_row(s: dict) -> dict:
                     "truth_seam_ratio": s["table"][1]["truth_seam_ratio"],
                     "space_variant": s["settings"].get("space_variant"),
                     "stage_cpu_seconds": s.get("stage_cpu_seconds"),
-                    "psf_banks": s.get("psf_banks")})
+                    "psf_banks": s.get("psf_banks"), "psfs_2d": s.get("psfs_2d")})
     return row
 
 

@@ -90,6 +90,30 @@ def test_cache_counts_the_cpu_seconds_of_the_banks_it_computed(tmp_path):
     assert stats["compute_seconds"] == s1
 
 
+def test_banks_computed_at_once_count_their_cpu_seconds_once():
+    """Two threads inside ``computing()`` at once: the CPU seconds added are the process's over
+    that span, not each thread's view of the process's (which would count the span twice)."""
+    import threading
+    import time
+
+    from metasensor.optics import cache as psf_cache
+
+    def spin():
+        with psf_cache.computing():
+            t = time.process_time()
+            while time.process_time() - t < 0.3:
+                pass
+
+    s0, p0 = psf_cache.stats["compute_seconds"], time.process_time()
+    workers = [threading.Thread(target=spin) for _ in range(2)]
+    for w in workers:
+        w.start()
+    for w in workers:
+        w.join()
+    added, spent = psf_cache.stats["compute_seconds"] - s0, time.process_time() - p0
+    assert 0.25 <= added <= spent + 1e-3
+
+
 @pytest.mark.parametrize("z4, z7", [(0.0, 0.0), (0.6, 0.3)])
 def test_band_limited_bank_equals_the_direct_one(z4, z7):
     """The bank from band_positions() positions per pitch, interpolated to the subsample-3 grid,

@@ -102,6 +102,27 @@ def test_cache_serves_the_mirror_images_of_a_widefield_psf(tmp_path):
     assert base.shape == (15, 15)
 
 
+def test_cache_counts_each_computation_apart(tmp_path):
+    """The views' banks and the 2D sensor's PSFs are counted apart (``kind_stats``), and the
+    totals (``stats``) are their sum."""
+    from metasensor.optics.widefield import widefield_psf
+
+    cfg = SystemConfig(nnum=3, mla_pitch=3 * 4.6e-6, mla_focal=3 * 46e-6, scan=3)
+    before = {k: dict(v) for k, v in psf_cache.kind_stats.items()}
+    totals = psf_cache.stats["hits"], psf_cache.stats["misses"]
+
+    def delta(kind):
+        now, old = psf_cache.kind_stats.get(kind, {}), before.get(kind, {})
+        return tuple(now.get(n, 0) - old.get(n, 0) for n in ("hits", "misses"))
+
+    for _ in range(2):
+        view_psfs(cfg, phase=_phase, size=9, cache=tmp_path)
+    widefield_psf(cfg, phase=_phase, size=15, cache=tmp_path)
+    assert delta("view_psfs") == (1, 1)
+    assert delta("widefield_psf") == (0, 1)
+    assert (psf_cache.stats["hits"] - totals[0], psf_cache.stats["misses"] - totals[1]) == (1, 2)
+
+
 def test_threads_asking_for_one_mirror_orbit_compute_it_once(tmp_path, monkeypatch):
     """Two threads asking at once for a bank and its mirror image (the simulator's kernel
     prefetch does) compute one bank: one miss and one hit, one file, both results equal to

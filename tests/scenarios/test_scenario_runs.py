@@ -62,7 +62,8 @@ def test_scenario_end_to_end_small(tmp_path, name, settings):
         assert {"simulation PSF banks", "reconstruction PSF banks", "registration",
                 "blending"} <= set(cpu)
         assert all(v >= 0 for v in cpu.values())
-        assert sum(saved["psf_banks"].values()) > 0
+        assert sum(saved["psf_banks"].values()) > 0  # the views' banks
+        assert sum(saved["psfs_2d"].values()) > 0  # the 2D sensor's, counted apart
 
 
 def test_bar_gains_count_finer_groups_and_flag_bounds():

@@ -11,8 +11,9 @@ of one key write the same bytes; the last rename wins); a corrupt entry counts a
 removed. A cache folder that cannot be written (read-only, full) only costs the caching: the
 computation goes on.
 ``stats`` counts hits and misses in this process, and ``compute_seconds``, the CPU seconds
-(``time.process_time``, all threads) spent computing the banks that missed (for tests and
-benchmarks).
+(``time.process_time``, all threads) while banks that missed were being computed (for tests
+and benchmarks; :func:`computing`); ``kind_stats`` splits the hits and misses of the PSF
+functions by computation (the views' banks apart from the 2D sensor's PSFs).
 
 Size: the folder is kept under ``METASENSOR_CACHE_MAX_GB`` GiB (default
 :data:`DEFAULT_MAX_GB`; ``inf`` for no limit). After each store the least recently used banks
@@ -26,17 +27,53 @@ from __future__ import annotations
 import contextlib
 import hashlib
 import os
+import threading
+import time
 from pathlib import Path
 
 import numpy as np
 
 __all__ = ["cache_dir", "set_cache_dir", "cache_key", "load", "load_first", "store", "stats",
-           "clear", "max_bytes", "DEFAULT_MAX_GB"]
+           "kind_stats", "count", "computing", "clear", "max_bytes", "DEFAULT_MAX_GB"]
 
 DEFAULT_MAX_GB = 10.0
 
 _setting: Path | None = None
 stats = {"hits": 0, "misses": 0, "compute_seconds": 0.0}
+kind_stats: dict[str, dict[str, int]] = {}
+"""Hits and misses of :func:`count` by computation (``"view_psfs"``, ``"widefield_psf"``)."""
+
+
+_busy = {"depth": 0, "since": 0.0}
+_busy_guard = threading.Lock()
+
+
+@contextlib.contextmanager
+def computing():
+    """A context for computing one missed bank: the process's CPU seconds
+    (``time.process_time``, all threads) while at least one such computation runs are added
+    to ``stats["compute_seconds"]`` once, however many threads compute at a time (each
+    computation timing itself would count the others' CPU too)."""
+    with _busy_guard:
+        if _busy["depth"] == 0:
+            _busy["since"] = time.process_time()
+        _busy["depth"] += 1
+    try:
+        yield
+    finally:
+        with _busy_guard:
+            _busy["depth"] -= 1
+            if _busy["depth"] == 0:
+                stats["compute_seconds"] += time.process_time() - _busy["since"]
+
+
+def count(kind: str, hit: bool) -> None:
+    """Count one lookup's hit or miss in :data:`stats` and under ``kind`` in
+    :data:`kind_stats`."""
+    name = "hits" if hit else "misses"
+    stats[name] += 1
+    row = kind_stats.setdefault(str(kind), {"hits": 0, "misses": 0})
+    row[name] += 1
 
 
 def set_cache_dir(path: str | Path | None) -> None:

@@ -20,7 +20,6 @@ Hand-written: a bookkeeping of array flips, tested against directly computed ban
 from __future__ import annotations
 
 import threading
-import time
 
 import numpy as np
 
@@ -150,26 +149,29 @@ def cached_mirrored(head: tuple, a_ref: np.ndarray, w_ref: np.ndarray, tail: tup
     head, a_ref, w_ref, tail, folder
         As :func:`mirrored_lookup`.
     compute : callable
-        ``compute() -> numpy.ndarray``, the result for this pupil (its CPU seconds are added to
-        the cache's ``stats["compute_seconds"]``).
+        ``compute() -> numpy.ndarray``, the result for this pupil (run inside
+        :func:`metasensor.optics.cache.computing`: the process's CPU seconds while it runs count
+        in the cache's ``stats["compute_seconds"]``, once however many threads compute).
 
     Returns
     -------
     numpy.ndarray
-        The bank ``(n, n, K, K)`` or 2D PSF ``(K, K)``. One hit or one miss is counted.
+        The bank ``(n, n, K, K)`` or 2D PSF ``(K, K)``. One hit or one miss is counted, in the
+        cache's totals and under the computation's name (``head[1]``, e.g. ``"view_psfs"``:
+        :func:`metasensor.optics.cache.count`).
     """
     from metasensor.optics import cache
 
+    kind = str(head[1]) if len(head) > 1 else ""
     _, hit = mirrored_lookup(head, a_ref, w_ref, tail, folder, count=False)
     if hit is None:
         with _orbit_lock(head, a_ref, w_ref, tail):
             key, hit = mirrored_lookup(head, a_ref, w_ref, tail, folder, count=False)
             if hit is None:  # no other thread stored a member meanwhile
-                cache.stats["misses"] += 1
-                cpu0 = time.process_time()
-                out = compute()
-                cache.stats["compute_seconds"] += time.process_time() - cpu0
+                cache.count(kind, hit=False)
+                with cache.computing():
+                    out = compute()
                 cache.store(key, out, folder)
                 return out
-    cache.stats["hits"] += 1
+    cache.count(kind, hit=True)
     return hit

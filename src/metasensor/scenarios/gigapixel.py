@@ -178,10 +178,10 @@ def run_gigapixel(out: str | Path, settings: GigapixelSettings | None = None,
         margin = cfg.field_offset_px + int(np.ceil(s.jitter)) + 4
         big = _scene(s.scene, (layout.shape[0] + 2 * margin + s.tile,
                                layout.shape[1] + 2 * margin + s.tile))
-        from metasensor.optics.cache import stats
+        from metasensor.optics.cache import kind_stats
 
         cpu: dict[str, float] = {}
-        h0, m0 = stats["hits"], stats["misses"]
+        psf0 = {k: dict(v) for k, v in kind_stats.items()}
         true_pos, meta_paths, s2d_paths, scale = _capture_tiles(out, s, layout, lens, cfg, big,
                                                                 margin, steps, cpu)
         c0 = time.process_time()
@@ -213,10 +213,19 @@ def run_gigapixel(out: str | Path, settings: GigapixelSettings | None = None,
             "positions_found": {f"{k[0]},{k[1]}": v for k, v in pos.items()},
             "mosaic_shape": shape, "mosaic_origin": box[:2], "blend_seconds": t_blend,
             "stage_cpu_seconds": cpu,
-            "psf_banks": {"computed": stats["misses"] - m0, "from_cache": stats["hits"] - h0},
+            "psf_banks": _psf_counts(kind_stats, psf0, "view_psfs"),
+            "psfs_2d": _psf_counts(kind_stats, psf0, "widefield_psf"),
             "settings": _settings_record(s),
         }
         return run.finish(summary, figs, "metasensor scenario: gigapixel mosaic (ED Fig. 7)")
+
+
+def _psf_counts(now: dict, before: dict, kind: str) -> dict[str, int]:
+    """The PSF cache's ``kind`` lookups since ``before``: ``computed`` (misses) and
+    ``from_cache`` (hits)."""
+    a, b = now.get(kind, {}), before.get(kind, {})
+    return {"computed": a.get("misses", 0) - b.get("misses", 0),
+            "from_cache": a.get("hits", 0) - b.get("hits", 0)}
 
 
 def _blended(out: Path, s: GigapixelSettings, cfg, pos: dict, box, meta_paths: dict,
