@@ -102,6 +102,33 @@ def test_cache_serves_the_mirror_images_of_a_widefield_psf(tmp_path):
     assert base.shape == (15, 15)
 
 
+@pytest.mark.parametrize("which", ["view_psfs", "widefield_psf"])
+def test_a_bank_does_not_depend_on_what_the_cache_held(tmp_path, which):
+    """The same pupil asked of a fresh cache, and of a cache that first served each of its
+    mirror images, gives the same bits (one computation per orbit, always the canonical
+    member's), and the amplitude map and phase are mirrored with it."""
+    from metasensor.optics.widefield import widefield_psf
+
+    cfg = SystemConfig(nnum=3, mla_pitch=3 * 4.6e-6, mla_focal=3 * 46e-6, scan=3)
+    amap = np.array([[1.0, 0.9, 0.8], [0.7, 1.0, 0.95], [0.6, 0.85, 0.75]])
+
+    def ask(phase, amplitude, folder):
+        if which == "view_psfs":
+            return view_psfs(cfg, [0, 0, 0, 0.1], phase=phase, amplitude=amplitude,
+                             size=9, cache=folder)
+        return widefield_psf(cfg, [0, 0, 0, 0.1], phase=phase, amplitude=amplitude,
+                             size=15, cache=folder)
+
+    fresh = ask(_phase, amap, tmp_path / "fresh")
+    for i, g in enumerate(SYMMETRIES[1:]):
+        folder = tmp_path / f"after_{i}"
+        ask(_mirrored(g), np.ascontiguousarray(mirror_pupil(amap, g)), folder)
+        assert np.array_equal(ask(_phase, amap, folder), fresh), g
+        assert len(list((folder / "psf").glob("*.npy"))) == 1
+    direct = ask(_phase, amap, False)
+    np.testing.assert_allclose(fresh, direct, rtol=0, atol=1e-6 * direct.max())
+
+
 def test_cache_counts_each_computation_apart(tmp_path):
     """The views' banks and the 2D sensor's PSFs are counted apart (``kind_stats``), and the
     totals (``stats``) are their sum."""

@@ -59,11 +59,11 @@ from metasensor.optics.coherent import (
 )
 from metasensor.optics.psf_args import check_config, check_depth, check_odd, check_zernike
 from metasensor.optics.pupil import PupilFn, disk_fraction, pupil_amplitude, pupil_phase
-from metasensor.optics.symmetry import cached_mirrored
+from metasensor.optics.symmetry import cached_mirrored, mirror_amplitude, mirror_function
 
-__all__ = ["view_psfs", "PSF_CODE_VERSION", "ENERGY_CUT"]
+__all__ = ["view_psfs", "mirrored_pupil", "PSF_CODE_VERSION", "ENERGY_CUT"]
 
-PSF_CODE_VERSION = "psf-1"
+PSF_CODE_VERSION = "psf-2"
 ENERGY_CUT = 0.005  # default windows keep >= 99.5 % of the energy
 
 # ----------------------------------------------------------------------------- helpers
@@ -173,11 +173,12 @@ def view_psfs(cfg: SystemConfig, zernike=None, depth: float = 0.0, *,
     cache : True (default cache folder, see :mod:`metasensor.optics.cache`), False (bypass) or
         a folder path. The key hashes the code version, ``cfg.optical_digest()`` (not the scan),
         the pupil amplitude and wavefront evaluated on a fixed 257² grid, depth, subsample, size,
-        oversample, ``points`` and ``band_limited``. A miss looks up the pupil's seven mirror
-        images too (:mod:`metasensor.optics.symmetry`: the bank of a mirrored pupil is the
-        mirrored bank), so a centred lens's symmetric field points share one computation; such
-        a bank equals the direct computation to float32 rounding (a few 1e-7 of its maximum),
-        so which of the two a call returns depends on what the cache held before.
+        oversample, ``points`` and ``band_limited``. The cache keeps one bank per mirror orbit of
+        the pupil (:mod:`metasensor.optics.symmetry`: the bank of a mirrored pupil is the
+        mirrored bank), computed for the orbit's canonical member whichever member is asked
+        for first, so a centred lens's symmetric field points share one computation and a call
+        returns the same bank whatever the cache held before (it equals the pupil's own direct
+        computation to float32 rounding, a few 1e-7 of its maximum).
     oversample : simulation samples per pixel per axis (odd multiple of subsample; default >= 3).
     points : odd number of point positions (and output samples) per lenslet pitch and axis, or
         None (``nnum · subsample``). Another value samples the bank on a grid of pitch
@@ -200,12 +201,45 @@ def view_psfs(cfg: SystemConfig, zernike=None, depth: float = 0.0, *,
     if cache is False:
         return _view_bank(cfg, z, depth, phase, amplitude, gmax, size, npts, sub, os_,
                           points is not None, band_limited, dev)
+    def compute(g):  # the bank of the pupil mirrored by g (the orbit's canonical member)
+        ph, am = mirrored_pupil(cfg, z, phase, amplitude, g)
+        return _view_bank(cfg, None, depth, ph, am, gmax, size, npts, sub, os_,
+                          points is not None, band_limited, dev)
+
     return cached_mirrored(
         (PSF_CODE_VERSION, "view_psfs", cfg.optical_digest()), a_ref, w_ref,
         (depth, sub, size, os_, *(() if points is None else ("points", npts)),
          *(("band",) if band_limited else ())), None if cache is True else Path(cache),
-        lambda: _view_bank(cfg, z, depth, phase, amplitude, gmax, size, npts, sub, os_,
-                           points is not None, band_limited, dev))
+        compute)
+
+
+def mirrored_pupil(cfg: SystemConfig, zernike, phase: PupilFn | None, amplitude, g):
+    """The pupil mirrored by the symmetry ``g`` (:mod:`metasensor.optics.symmetry`), as the
+    ``phase`` and ``amplitude`` arguments of the PSF functions (the Zernike terms folded into
+    the phase; the defocus of ``depth`` is radial and stays as it is).
+
+    Parameters
+    ----------
+    cfg : SystemConfig
+        The system.
+    zernike : numpy.ndarray or None
+        Noll coefficients [waves].
+    phase : callable or None
+        An extra wavefront ``phase(rho_x, rho_y)`` [waves].
+    amplitude : None, numpy.ndarray or callable
+        As :func:`metasensor.optics.pupil.pupil_amplitude` takes it.
+    g : Symmetry
+        The element.
+
+    Returns
+    -------
+    (callable or None, amplitude)
+        The mirrored wavefront [waves] (None: no aberration) and amplitude.
+    """
+    amp = mirror_amplitude(amplitude, g)
+    if zernike is None and phase is None:
+        return None, amp
+    return mirror_function(lambda x, y: pupil_phase(cfg, x, y, zernike, 0.0, phase), g), amp
 
 
 def _view_bank(cfg, z, depth, phase, amplitude, gmax, size, npts, sub, os_, pointed,

@@ -25,6 +25,7 @@ from metasensor.optics.psf import (
     _ray_reach,
     _reference_pupil,
     _window_size,
+    mirrored_pupil,
 )
 from metasensor.optics.psf_args import check_config, check_depth, check_odd, check_zernike
 from metasensor.optics.pupil import PupilFn
@@ -47,8 +48,8 @@ def widefield_psf(cfg: SystemConfig, zernike=None, depth: float = 0.0, sampling=
     fraction of light on the K×K window (≈ 1 for the clear pupil). Same pupil arguments as
     :func:`metasensor.optics.psf.view_psfs`. ``size`` None: smallest odd K keeping >= 99.5 %
     of the energy. ``cache``: as :func:`metasensor.optics.psf.view_psfs` (the key hashes the
-    pupil on the same grid, depth, ``sampling`` and ``size``; a miss looks up the pupil's seven
-    mirror images, whose PSF is the mirrored PSF).
+    pupil on the same grid, depth, ``sampling`` and ``size``; one PSF per mirror orbit of the
+    pupil, whose PSF is the mirrored PSF, as for the banks).
     """
     check_config(cfg)
     say_fallbacks(cfg)
@@ -64,11 +65,13 @@ def widefield_psf(cfg: SystemConfig, zernike=None, depth: float = 0.0, sampling=
     a_ref, w_ref, gmax = _reference_pupil(cfg, z, depth, phase, amplitude)
     if cache is False:
         return _widefield(cfg, z, depth, phase, amplitude, sampling, size, gmax, dev)
+    def compute(g):  # the PSF of the pupil mirrored by g (the orbit's canonical member)
+        ph, am = mirrored_pupil(cfg, z, phase, amplitude, g)
+        return _widefield(cfg, None, depth, ph, am, sampling, size, gmax, dev)
+
     return cached_mirrored((PSF_CODE_VERSION, "widefield_psf", cfg.optical_digest()), a_ref,
                            w_ref, (depth, float(sampling), size),
-                           None if cache is True else Path(cache),
-                           lambda: _widefield(cfg, z, depth, phase, amplitude, sampling, size,
-                                              gmax, dev))
+                           None if cache is True else Path(cache), compute)
 
 
 def _widefield(cfg, z, depth, phase, amplitude, sampling, size, gmax, dev) -> np.ndarray:
