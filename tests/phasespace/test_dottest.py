@@ -1,9 +1,10 @@
 """One dot-product test for every linear operator of the reconstruction: ⟨A x, y⟩ = ⟨x, Aᵀ y⟩.
 
-Reference: exact adjoint pairs; tolerance 1e-6 of the Cauchy–Schwarz scale ``‖A x‖·‖y‖``
-(float32 operators, float64 inner products; measured 1e-11 to 2e-8 over four seeds, where a
-mismatch relative to the inner product read up to 2.5e-5 on an unlucky draw); a wrong adjoint
-reads about 1e-2.
+Reference: exact adjoint pairs; tolerance 1e-7 of the Cauchy–Schwarz scale ``‖A x‖·‖y‖``
+(float32 operators, float64 inner products). On these operators ``|⟨A x, y⟩|`` is about 1e-2 of
+that scale, so the bound is the old 1e-5 relative to the inner product for a typical draw, without
+its unlucky ones (measured: round-off 1e-11 to 2.7e-8 over eight seeds on one and two threads,
+where the inner-product measure read up to 2.5e-5); a wrong adjoint reads 1.3e-2 to 4e-2.
 """
 
 import math
@@ -113,7 +114,7 @@ OPERATORS = {
 def test_every_operator_passes_the_dot_test(name):
     forward, adjoint, dom, rng_shape = OPERATORS[name]()
     for seed in (0, 1, 2, 3):
-        assert dot_test(forward, adjoint, dom, rng_shape, seed=seed) < 1e-6
+        assert dot_test(forward, adjoint, dom, rng_shape, seed=seed) < 1e-7
 
 
 def test_dot_test_detects_a_wrong_adjoint():
@@ -121,7 +122,7 @@ def test_dot_test_detects_a_wrong_adjoint():
     for wrong in (lambda y: 2 * op.adjoint(y), lambda y: op.adjoint(y).flip(-1)):
         for seed in (0, 1):
             err = dot_test(op.forward, wrong, op.domain_shape, op.range_shape, seed=seed)
-            assert err > 1e-3
+            assert err > 1e-2
     with pytest.raises(ValueError, match="shape"):
         dot_test(op.forward, op.adjoint, op.domain_shape, (1, 2, 3))
 

@@ -121,12 +121,13 @@ def _field_zernike(yn, xn, strength=3.0):
 def multisite():
     # A field-dependent aberration (simulated per 4 x 4 field block, up to ~1.8 waves r.m.s. in
     # the corners); ISA in 4 x 4 blocks with the true local aberrations vs one global PSF (the
-    # field-mean aberration). A 492-px field: blocks of 123 px. The models are compared at one
-    # global data weight (misfit_weights=None): the default's local misfit weights down-weight
-    # the samples a wrong model misses, which rescues the global PSF in part. Measured (camera,
-    # seed 1, 30 dB, sparse-gradient prior): one weight 24.54 vs 20.92 dB (3.62 dB); defaults
-    # 24.44 vs 21.48 dB (2.96 dB). About 150 s with a warm PSF cache; ~540 s in a fresh test
-    # session (its private cache starts cold, so the 16 blocks' PSF banks are computed).
+    # field-mean aberration). A 492-px field: blocks of 123 px. Each is reconstructed with the
+    # defaults and with one global data weight (misfit_weights=None): the default's local
+    # misfit weights down-weight the samples a wrong model misses, which rescues the global PSF
+    # in part. Measured (camera, seed 1, 30 dB, sparse-gradient prior): defaults 24.44 vs
+    # 21.48 dB (2.96 dB; 3.44 dB before the misfit weights); one weight 24.54 vs 20.92 dB
+    # (3.62 dB). About 300 s with a warm PSF cache; longer in a fresh test session (its
+    # private cache starts cold, so the 16 blocks' PSF banks are computed).
     # Richardson-Lucy, gain vs field size: 252 px (63-px blocks, narrower than the PSF windows)
     # 2.78 dB, 372 px 2.99 dB, 492 px 3.27 dB (24.11 vs 20.84 dB).
     import metasensor as ms
@@ -140,25 +141,39 @@ def multisite():
     grid = _field_zernike(*block_centres_normalised(4, 4))
     cap = simulate(natural_image("camera", n * 15 + 12), cfg, field_zernike=grid, snr_db=30.0,
                    seed=1, comparison=False)
-    one_weight = HQSOptions(misfit_weights=None)
-    local = ms.reconstruct(cap.views, cfg, field_zernike=grid, blocks=(4, 4),
-                           solver_options=one_weight)
-    glob = ms.reconstruct(cap.views, cfg, zernike=grid.reshape(16, -1).mean(0), blocks=(1, 1),
-                          solver_options=one_weight)
-    return cap, local, glob
+    out = {}
+    for label, opts in (("default", None), ("one weight", HQSOptions(misfit_weights=None))):
+        local = ms.reconstruct(cap.views, cfg, field_zernike=grid, blocks=(4, 4),
+                               solver_options=opts)
+        glob = ms.reconstruct(cap.views, cfg, zernike=grid.reshape(16, -1).mean(0),
+                              blocks=(1, 1), solver_options=opts)
+        out[label] = (local, glob)
+    return cap, out
 
 
-def test_multisite_true_local_aberrations_beat_one_global_psf_by_3db(multisite):
-    cap, local, glob = multisite
+def _multisite_gain(multisite, label):
+    cap, out = multisite
+    local, glob = out[label]
     gain = _psnr(cap.truth, local.image) - _psnr(cap.truth, glob.image)
-    print(f"multisite PSNR gain {gain:.2f} dB")
-    assert gain >= 3.0
+    print(f"multisite PSNR gain ({label}) {gain:.2f} dB")
+    return gain
+
+
+@pytest.mark.xfail(strict=True, reason="measured 2.96 dB on the defaults: the local misfit "
+                   "weights rescue the global PSF (20.92 -> 21.48 dB); the model's own gain at "
+                   "one data weight is tested below (3.62 dB)")
+def test_multisite_true_local_aberrations_beat_one_global_psf_by_3db(multisite):
+    assert _multisite_gain(multisite, "default") >= 3.0
+
+
+def test_multisite_model_beats_one_global_psf_by_3db_at_one_data_weight(multisite):
+    assert _multisite_gain(multisite, "one weight") >= 3.0
 
 
 def test_multisite_has_no_seams(multisite):
     # mean gradient across each interior block border no larger than the largest row mean of the
     # gradients in a band of +-15 px around it
-    _, local, _ = multisite
+    local = multisite[1]["default"][0]
     img = local.image
     grad = np.abs(np.diff(img, axis=0))
     for b in local.blocks:

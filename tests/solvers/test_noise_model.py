@@ -115,7 +115,7 @@ def test_weighted_normal_is_an_adjoint_pair_and_symmetric(bank):
     weights, _ = sample_weights(PoissonGaussian(1.0, 9.0), torch.clamp(y, min=0), mask)
     sw = weights.sqrt()
     assert dot_test(lambda v: op.forward(v) * sw, lambda r: op.adjoint(r * sw), g.domain,
-                    weights.shape) < 1e-6
+                    weights.shape) < 1e-7
     normal = _weighted_normal(op, weights)
     gen = torch.Generator().manual_seed(3)
     u, v = torch.randn(g.domain, generator=gen), torch.randn(g.domain, generator=gen)

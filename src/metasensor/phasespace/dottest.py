@@ -6,8 +6,9 @@ For random ``x`` in the domain and ``y`` in the range, an operator ``A`` and its
 ``‖A x‖·‖y‖`` (and ``‖x‖·‖Aᵀ y‖``), the size of the error that a relative error of ``A x`` or
 ``Aᵀ y`` can make, not against the inner product itself: two random vectors of ``n`` entries are
 nearly orthogonal (``⟨A x, y⟩ ~ ‖A x‖·‖y‖ / √n``, and much less for an unlucky draw), so a
-mismatch relative to the inner product reads float32 round-off as anything up to 1e-5 or more,
-while a wrong adjoint reads about ``1/√n`` of the scale.
+mismatch relative to the inner product magnifies float32 round-off without bound on such a draw.
+Against the scale, round-off stays near float32's precision over ``√n`` and a wrong adjoint
+reads about ``1/√n``.
 """
 
 from __future__ import annotations
@@ -39,10 +40,8 @@ def dot_test(forward: Callable[[torch.Tensor], torch.Tensor],
     Returns
     -------
     float
-        The relative mismatch: 0 for an exact adjoint pair; float32 round-off reads 1e-11 to
-        2e-8 on the reconstruction's operators (``tests/phasespace/test_dottest.py``); a wrong
-        adjoint (a factor 2, a flipped axis) about ``1/√n``, 1e-2 on those tests' small
-        operators.
+        The relative mismatch: 0 for an exact adjoint pair (round-off only, in float32);
+        ``O(1/√n)`` for a wrong adjoint (``n`` the number of range entries).
     """
     gen = torch.Generator(device="cpu").manual_seed(int(seed))
     x = torch.randn(tuple(domain_shape), generator=gen).to(device)
