@@ -153,8 +153,7 @@ def _hard_row(sv, n: int, smoothing, label: str, edges=ms.depth.EdgeSnap(),
               refiner=ms.depth.EdgeRefiner(), speckles=ms.depth.Speckles(),
               visibility=ms.depth.Visibility(), eps=None, radius=None) -> dict:
     t0 = time.perf_counter()
-    res = ms.estimate_depth(sv.views, sv.config, view_mask=np.ones((n, n), bool),
-                            smoothing=smoothing, edges=edges, refiner=refiner,
+    res = ms.estimate_depth(sv.views, sv.config, smoothing=smoothing, edges=edges, refiner=refiner,
                             speckles=speckles, visibility=visibility, eps=eps,
                             **({} if radius is None else {"radius": radius}))
     dt = time.perf_counter() - t0

@@ -62,6 +62,7 @@ def test_depth_command_writes_maps_and_figure(views_file, tmp_path, monkeypatch)
     assert meta["unit"].startswith("m ")
     summary = json.loads((out / "depth.json").read_text())
     assert summary["depth_kind"] == "object"
+    assert summary["views_used"] == 113  # the configured pupil: the views beyond it are dark
     lo, hi = summary["disparity_p5_p95"]
     assert lo <= summary["median_disparity"] <= hi
     png = (out / "depth.png").read_bytes()

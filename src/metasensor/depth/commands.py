@@ -87,7 +87,8 @@ def run_depth(views: Path, out: Path, system: Path | None = None, config: Path |
                                                             len(res.candidates)],
                "median_disparity": float(np.median(res.disparity)),
                "disparity_p5_p95": [float(v) for v in np.percentile(res.disparity, [5, 95])],
-               "mean_confidence": float(res.confidence.mean()), "files": written}
+               "mean_confidence": float(res.confidence.mean()),
+               "views_used": int(res.views_used.sum()), "files": written}
     atomic_write_text(staged.path / "depth.json", json.dumps(summary, indent=2))
     staged.commit()
     return summary

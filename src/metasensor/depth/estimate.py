@@ -2,7 +2,8 @@
 
 Pipeline (the paper's Fig. 6 and Methods, "Depth estimation"):
 
-1. Views inside the pupil (``cfg.view_mask()``), each divided by its mean (vignetting and the
+1. Views inside the pupil (``cfg.view_mask()``, or every lit view where the data show a wider
+   pupil: :mod:`metasensor.depth.pupil`), each divided by its mean (vignetting and the
    coded aperture dim the outer views); optionally warped by the system aberration's per-view
    shift maps (``calibration``) so that only the parallax is left.
 2. Plane sweep: a cost volume over ``candidates`` disparities (variance of the aligned views
@@ -52,6 +53,7 @@ from metasensor.depth.cost import CostVolume
 from metasensor.depth.edges import EdgeSnap, snap_edges
 from metasensor.depth.filters import GuidedFilter
 from metasensor.depth.learned import EdgeRefiner, refine_edges
+from metasensor.depth.pupil import default_view_mask
 from metasensor.depth.refine import (
     fill_low_confidence,
     gauss_newton_refine,
@@ -182,12 +184,14 @@ def estimate_depth(views, cfg: SystemConfig, calibration=None, *, candidates: in
         end; a given span is kept, with a warning when the estimate saturates it.
     candidates : number of plane-sweep disparities; None: the outermost view moves
         ``OUTER_STEP`` view px per candidate (at least ``MIN_CANDIDATES``).
-    view_mask : boolean ``(nnum, nnum)`` of the views to use (default ``cfg.view_mask()``); it must
-        contain the centre view. ``cost``: ``"variance"`` (with the centre term of step 2) or
-        ``"sad"``; ``occlusion``: half-pupil occlusion handling. ``radius`` [view px] and
-        ``eps`` (relative to the guide's variance) of the guided cost aggregation (also of
-        the refinement's aggregation and the fill; None: ``EPS_PLAIN`` for plain light-field
-        views, ``cfg.scan == 1``, else ``EPS_SCANNED``).
+    view_mask : boolean ``(nnum, nnum)`` of the views to use (default ``cfg.view_mask()``, with
+        every lit view where views beyond the configured pupil are lit, warned:
+        :func:`metasensor.depth.pupil.default_view_mask`); it must contain the centre view.
+        ``cost``: ``"variance"`` (with the centre term of step 2) or ``"sad"``; ``occlusion``:
+        half-pupil occlusion handling. ``radius`` [view px] and ``eps`` (relative to the
+        guide's variance) of the guided cost aggregation (also of the refinement's aggregation
+        and the fill; None: ``EPS_PLAIN`` for plain light-field views, ``cfg.scan == 1``, else
+        ``EPS_SCANNED``).
         ``refine_iterations``: Gauss–Newton steps (0 = parabola fit only), aggregated over
         ``refine_radius`` (None: ``radius``). ``fill``: replace pixels
         with confidence below ``fill_threshold`` by an edge-aware, confidence-weighted average
@@ -211,6 +215,7 @@ def estimate_depth(views, cfg: SystemConfig, calibration=None, *, candidates: in
     focal_length, focus_distance : main-lens geometry [m] overriding the config's.
     """
     arr = check_views(views, cfg)
+    view_mask = default_view_mask(arr, cfg) if view_mask is None else view_mask
     if eps is None:
         eps = EPS_PLAIN if cfg.scan == 1 else EPS_SCANNED
     mask, fill_radius = check_settings(cfg, arr, candidates, radius, refine_iterations,
@@ -247,7 +252,7 @@ def estimate_depth(views, cfg: SystemConfig, calibration=None, *, candidates: in
             disp = reveal_background(stack, au, av, centre, disp, conf, visibility)
         disp = _edges_decided(stack, au, av, disp, conf, amax, cfg, edges, refiner, speckles)
     return depth_result(disp, conf, idx, fill_threshold, cands, cfg, lens,
-                        "given" if limit is None else "measured", sat)
+                        "given" if limit is None else "measured", sat, mask)
 
 
 def _used_views(arr, mask, cfg: SystemConfig, shift_maps, normalize: bool, dev):

@@ -46,6 +46,7 @@ class DepthResult:
         beyond); for a given span, at least the shares of the coarse wide search's confident
         estimates below and above it.
     config : the system configuration used.
+    views_used : bool ``(nnum, nnum)``, the views the estimate used, or None where not known.
     """
 
     disparity: np.ndarray
@@ -59,6 +60,7 @@ class DepthResult:
     valid: np.ndarray | None = None
     span_source: str = "given"
     saturated: tuple[float, float] = (0.0, 0.0)
+    views_used: np.ndarray | None = None
 
     def __repr__(self) -> str:  # the maps by shape and dtype, not their values
         from metasensor.summary import short_repr
@@ -67,7 +69,7 @@ class DepthResult:
 
 
 def depth_result(disp, conf, idx, fill_threshold: float, cands, cfg, lens, span_source,
-                 sat) -> DepthResult:
+                 sat, views_used=None) -> DepthResult:
     """The :class:`DepthResult` of the estimate.
 
     Parameters
@@ -89,6 +91,8 @@ def depth_result(disp, conf, idx, fill_threshold: float, cands, cfg, lens, span_
         ``"given"`` or ``"measured"``.
     sat : (float, float)
         Saturated shares (low, high) of the span.
+    views_used : numpy.ndarray, optional
+        Boolean ``(nnum, nnum)`` mask of the views the estimate used.
 
     Returns
     -------
@@ -107,4 +111,5 @@ def depth_result(disp, conf, idx, fill_threshold: float, cands, cfg, lens, span_
         disparity=disparity, confidence=confidence, image_depth=z, object_distance=obj,
         depth=obj, depth_kind="object" if obj is not None else "image",
         candidates=cands, config=cfg, valid=valid, span_source=span_source, saturated=sat,
+        views_used=None if views_used is None else np.array(views_used, dtype=bool),
     )
