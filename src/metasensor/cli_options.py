@@ -13,8 +13,8 @@ import re
 from collections.abc import Callable
 from typing import Any
 
-__all__ = ["SCAN_ORDER_SYNTAX", "SCAN_ORDER_HELP", "SCAN_ORDER_NAMES", "parse_scan_order",
-           "parse_pair", "typed_command"]
+__all__ = ["SCAN_ORDER_SYNTAX", "SCAN_ORDER_HELP", "SCAN_ORDER_NAMES", "SCAN_ORDER_PRESETS",
+           "parse_scan_order", "parse_pair", "typed_command"]
 
 SCAN_ORDER_NAMES = ("--scan-order", "--order")
 SCAN_ORDER_SYNTAX = ("row-major, serpentine, spiral, or the (row,col) phases in acquisition "
@@ -22,8 +22,9 @@ SCAN_ORDER_SYNTAX = ("row-major, serpentine, spiral, or the (row,col) phases in 
                      "'one-based:1,1;1,2;...' for one-based phases), or a scan-pattern PNG "
                      "whose pixel (r,c) holds the acquisition index of phase (r,c)")
 SCAN_ORDER_HELP = f"scan order: {SCAN_ORDER_SYNTAX}"
-_PRESETS = ("row-major", "rowmajor", "raster", "serpentine", "snake", "boustrophedon",
-            "spiral")
+SCAN_ORDER_PRESETS = ("row-major", "rowmajor", "raster", "serpentine", "snake",
+                      "boustrophedon", "spiral")
+"""The preset names of ``--scan-order`` (each needs the scan period from elsewhere)."""
 _PAIR = re.compile(r"\(\s*(-?\d+)\s*,\s*(-?\d+)\s*\)")
 
 
@@ -70,7 +71,7 @@ def parse_scan_order(text: str | None, period: int | None = None, *,
         return None
     text = text.strip()
     try:
-        if text.lower() in _PRESETS:
+        if text.lower() in SCAN_ORDER_PRESETS:
             return check_scan_order(text.lower(), period or default_period)
         if text.lower().endswith(".png"):  # the authors' scan-pattern image
             from pathlib import Path

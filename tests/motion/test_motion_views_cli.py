@@ -85,6 +85,11 @@ def test_cli_motion(tmp_path):
     before = src.read_bytes()
     res = CliRunner().invoke(app, ["motion", str(src), "--scan-order", "row-major",
                                    "--out", str(tmp_path / "corrected.tif")])
+    # a stack without a configuration: a preset name cannot tell the scan period
+    assert res.exit_code != 0 and "--period" in str(res.exception)
+    assert not (tmp_path / "corrected.tif").exists()
+    res = CliRunner().invoke(app, ["motion", str(src), "--scan-order", "row-major",
+                                   "--period", "5", "--out", str(tmp_path / "corrected.tif")])
     assert res.exit_code == 0, res.output
     assert src.read_bytes() == before  # input untouched
     out = read_views(tmp_path / "corrected.tif")
@@ -92,7 +97,8 @@ def test_cli_motion(tmp_path):
     assert (tmp_path / "corrected.png").stat().st_size > 1000  # before / after / difference
     assert psnr(out[1, 1], truth[1, 1], INNER) > psnr(views[1, 1], truth[1, 1], INNER) + 6
     res = CliRunner().invoke(app, ["motion", str(src), "--scan-order", "row-major",
-                                   "--no-fallback", "--out", str(tmp_path / "plain.tif")])
+                                   "--period", "5", "--no-fallback",
+                                   "--out", str(tmp_path / "plain.tif")])
     assert res.exit_code == 0, res.output
     plain = correct_motion_views(views, ORDER, progress=False, fallback=False)
     np.testing.assert_allclose(read_views(tmp_path / "plain.tif"), plain, atol=1e-6)

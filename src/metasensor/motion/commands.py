@@ -6,12 +6,13 @@ from pathlib import Path
 
 import typer
 
-from metasensor.cli_options import SCAN_ORDER_HELP, SCAN_ORDER_NAMES
+from metasensor.cli_options import SCAN_ORDER_HELP, SCAN_ORDER_NAMES, SCAN_ORDER_PRESETS
 
 
 def parse_scan_order(text: str, period: int) -> list[tuple[int, int]]:
     """``--scan-order`` (:func:`metasensor.cli_options.parse_scan_order`) → checked scan order.
-    ``period`` 0: a list sets its own period (sqrt of its length); names use 5."""
+    ``period`` 0: a list sets its own period (sqrt of its length); names use 5 (the command
+    refuses a name without a period first, :func:`_scan_order`)."""
     from metasensor.cli_options import parse_scan_order as parse
 
     return parse(text or "row-major", period or None)
@@ -55,7 +56,9 @@ def _flow_view(text: str, nu: int, nv: int):
 
 def _scan_order(text: str | None, stored: dict, period: int, views: Path):
     """The scan order: ``--scan-order`` if given, else the one stored with the views, else
-    row-major."""
+    row-major. ``period`` 0 (neither ``--period`` nor a stored configuration): only an order
+    that sets its own period (a list, stored or given) is accepted; a preset name or the
+    default would have to guess the period, so that is a one-line error."""
     if text is None and isinstance(stored.get("scan_order"), list):
         from metasensor.sensor.scan import check_scan_order, period_of
 
@@ -63,7 +66,12 @@ def _scan_order(text: str | None, stored: dict, period: int, views: Path):
         order = check_scan_order(order, period or period_of(order))
         typer.echo(f"using the scan order stored in {Path(views).name}")
         return order
-    return parse_scan_order(text or "row-major", period)
+    text = text or "row-major"
+    if not period and text.strip().lower() in SCAN_ORDER_PRESETS:
+        raise ValueError(f"{Path(views).name} carries no system configuration, so its scan "
+                         f"period is unknown: pass --period (e.g. --period 5 for a 5 x 5 scan) "
+                         f"or an explicit --scan-order list")
+    return parse_scan_order(text, period)
 
 
 def register(app: typer.Typer) -> None:
@@ -76,8 +84,9 @@ def register(app: typer.Typer) -> None:
         scan_order: str | None = typer.Option(
             None, *SCAN_ORDER_NAMES,
             help=f"{SCAN_ORDER_HELP} (default: the order stored in the stack, else row-major)"),
-        period: int = typer.Option(0, "--period",
-                                   help="scan period (default: from the stack's config, or 5)"),
+        period: int = typer.Option(
+            0, "--period", help="scan period (default: from the stack's config; needed without "
+                                "one unless --scan-order is a list)"),
         reference: int = typer.Option(-1, "--reference",
                                       help="index into the scan order to align to (-1: middle)"),
         mode: str = typer.Option("object", "--mode", help="object (one flow) or turbulence"),
