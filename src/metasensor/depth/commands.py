@@ -108,7 +108,8 @@ def register(app: typer.Typer) -> None:
         candidates: int = typer.Option(64, "--candidates", help="number of disparity candidates"),
         disparity_range: str | None = typer.Option(
             None, "--range", help="disparity search range 'LO,HI' in view px per view step "
-                                  "(default ±scan/2)"),
+                                  "(default: measured from the views, widened where the "
+                                  "estimate reaches an end)"),
         occlusion: bool = typer.Option(True, "--occlusion/--no-occlusion",
                                        help="half-pupil occlusion handling"),
         radius: int = typer.Option(4, "--radius", help="cost aggregation radius [view px]"),
