@@ -137,3 +137,40 @@ def test_a_note_left_by_a_failed_command_is_not_said_by_the_next(tmp_path, bead_
         main()
     assert info.value.code in (0, None)
     assert "does not set" not in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("nnum", [5, 9, 13, 15, 21])
+def test_lattice_period_is_measured_whatever_nnum_is_configured(nnum):
+    """The period is searched over every lenslet size, not only near the configured nnum, and
+    harmonics (p/2, p/3...) are taken down to the fundamental."""
+    frame = ls.render((24 * nnum, 24 * nnum), nnum, float(nnum), 0.2, (5.0, 5.0))
+    for configured in (15, nnum):
+        period, strength = lattice_period([frame], configured)
+        assert abs(period - nnum) < 0.02 * nnum and strength >= 12, (configured, period)
+
+
+def nine_px_scan(shape=(216, 216)):
+    """The 9 frames of a 3 x 3 MLA scan of 9-px lenslets (steps of 3 px), uint16."""
+    frames = np.stack([ls.render(shape, 9, 9.0, 0.0, (4.0, 4.0), nominal_rect=(3 * r, 3 * c))
+                       for r, c in scan_order(3)])
+    return np.round(4000 * frames / frames.max()).astype(np.uint16)
+
+
+def test_realign_refuses_frames_of_lenslets_far_from_nnum(tmp_path):
+    """9-px lenslets under the default nnum 15 (outside the old +-25 % search): exit 2, one line
+    naming the measured size and the nnum to set."""
+    write_raw(tmp_path / "nine.tif", nine_px_scan())
+    res = runner.invoke(app, ["realign", str(tmp_path / "nine.tif"), "--scan", "3", "--out",
+                              str(tmp_path / "views.tif")])
+    assert isinstance(res.exception, ValueError), res.output
+    msg = str(res.exception)
+    assert "\n" not in msg and re.search(r"measures 9\.\d\d px but nnum is 15", msg), msg
+    assert "set nnum = 9" in msg and not (tmp_path / "views.tif").exists()
+
+
+def test_calibrate_names_the_lenslet_size_it_measures():
+    """A white frame of 9-px lenslets calibrated as nnum 15: the period it measures, not 'no
+    lenslet grid found'."""
+    white = ls.render((216, 216), 9, 9.0, 0.0, (4.0, 4.0), white=True)
+    with pytest.raises(ValueError, match=r"measures 9\.\d\d px but nnum is 15; set nnum = 9"):
+        calibrate(white, 15)

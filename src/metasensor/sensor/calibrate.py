@@ -178,6 +178,7 @@ def find_grid(frame, nnum: int, pitch_range: tuple[float, float] | None = None,
     same = [c for c in crops if c.shape == crop.shape]
     ((p1, a1), (p2, a2)), floor = _coarse_peaks(same, nnum, pitch_range)
     if min(a1, a2) < 8 * floor:
+        _check_period(same, nnum)
         raise ValueError("no lenslet grid found in the frame (the lattice peaks are not above the "
                          "background: a flat or lens-less frame?)")
     dfts = [_Dft(c) for c in crops]
@@ -199,6 +200,18 @@ def find_grid(frame, nnum: int, pitch_range: tuple[float, float] | None = None,
     return {"pitch": float(pitch), "rotation": math.degrees(t), "point": point, "g": g,
             "contrast": float(np.abs(vals).mean() / max(dft.norm, 1e-300)),
             "strength": float(min(a1, a2) / floor)}
+
+
+def _check_period(crops: list[np.ndarray], nnum: int) -> None:
+    """Refuse frames whose lenslet lattice is measured (:func:`metasensor.sensor.checks.
+    lattice_period`) at a period more than :data:`~metasensor.sensor.checks.PERIOD_TOLERANCE`
+    from ``nnum``: the grid search near ``nnum`` cannot find it, and the error names the size."""
+    from metasensor.sensor.checks import PERIOD_TOLERANCE, lattice_period
+
+    got = lattice_period(crops, nnum)
+    if got is not None and abs(got[0] - nnum) > PERIOD_TOLERANCE * nnum:
+        raise ValueError(f"the frame's lenslet period measures {got[0]:.2f} px but nnum is "
+                         f"{nnum}; set nnum = {round(got[0])} if the lenslets are that size")
 
 
 def _brightest_phase(img: np.ndarray, point: np.ndarray, g: np.ndarray, pitch: float):
@@ -314,7 +327,7 @@ def calibrate(white, nnum: int, frames=None, scan: int = 1, scan_order=None,
             stack = [f for f in frames if f is not white]
     grid = find_grid(fit_img, nnum, pitch_range, stack=stack)
     residual, _ = lattice_residual(fit_img, grid["g"], grid["point"])
-    _check_fit(grid["strength"], residual)
+    _check_fit(grid["strength"], residual, fit_img, nnum)
     t = math.radians(grid["rotation"])
     s = grid["pitch"] / nnum
     m = s * np.array([[math.cos(t), math.sin(t)], [-math.sin(t), math.cos(t)]])
@@ -347,12 +360,14 @@ def calibrate(white, nnum: int, frames=None, scan: int = 1, scan_order=None,
                        fit_residual=None if not math.isfinite(residual) else round(residual, 4))
 
 
-def _check_fit(strength: float, residual: float) -> None:
+def _check_fit(strength: float, residual: float, image: np.ndarray, nnum: int) -> None:
     """Refuse a lattice fit that does not describe the field (module docstring of
-    :mod:`metasensor.sensor.checks`)."""
+    :mod:`metasensor.sensor.checks`), naming the lenslet size when ``image`` measures one far
+    from ``nnum`` (the fit then locked on a harmonic or cross term of that lattice)."""
     from metasensor.sensor.checks import MAX_RESIDUAL_PX
 
     if math.isfinite(residual) and residual > MAX_RESIDUAL_PX:
+        _check_period([image], nnum)
         raise ValueError(f"untrustworthy lenslet-grid fit: the fitted lattice misses the "
                          f"lenslets across the field by {residual:.2f} px r.m.s. (lattice peak "
                          f"{strength:.0f}x the background); calibrate from a white frame, or "

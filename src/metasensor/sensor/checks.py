@@ -19,13 +19,17 @@ import numpy as np
 from scipy import fft as sfft
 from scipy import ndimage
 
+from metasensor.config import MAX_NNUM
+
 __all__ = ["lattice_period", "lattice_residual", "PERIOD_TOLERANCE", "MIN_PEAK_STRENGTH",
-           "MAX_RESIDUAL_PX"]
+           "FAR_PEAK_STRENGTH", "MAX_RESIDUAL_PX"]
 
 PERIOD_TOLERANCE = 0.02  # realign refuses frames whose period differs more from nnum
 MIN_PEAK_STRENGTH = 12.0  # a lattice peak less prominent than this is not trusted
+FAR_PEAK_STRENGTH = 3 * MIN_PEAK_STRENGTH  # ... nor one far from nnum less prominent than this
 MAX_RESIDUAL_PX = 0.3  # calibrate refuses a lattice that misses the field's tiles by more
 _CROP = 512
+_MIN_PERIOD = 3.0  # the smallest lenslet period searched [px]
 _PAD = 4
 
 
@@ -60,10 +64,32 @@ def _peak(power: np.ndarray, sel: np.ndarray, side: int) -> tuple[np.ndarray, fl
 
 
 def lattice_period(frames, nnum: int, max_frames: int = 9) -> tuple[float, float] | None:
-    """(period [px], peak strength) of the lenslet lattice of ``frames`` ((T, H, W) or a list
-    of (H, W)), searched within ``0.8 .. 1.25 × nnum``; None when the frames are too small
-    (< 4 lenslets per side), differ in shape, hold NaN or infinite values, or hold no lattice
-    peak of prominence >= :data:`MIN_PEAK_STRENGTH`."""
+    """The lenslet period of a stack of frames, measured over every period a lenslet can have.
+
+    Parameters
+    ----------
+    frames : array_like
+        ``(T, H, W)`` frames or a list of ``(H, W)`` frames; the first ``max_frames`` are used.
+    nnum : int
+        The configured pixels per lenslet: only the frames' minimum size depends on it; the
+        period is searched from 3 px to :data:`metasensor.config.MAX_NNUM` (at most a quarter
+        of the frame's side), so that frames of another lenslet size are measured, not missed.
+    max_frames : int
+        How many frames' power spectra are summed.
+
+    Returns
+    -------
+    tuple of float or None
+        ``(period [px], peak strength)`` from both axes' fundamentals. A lattice of period p
+        also shows peaks at p/2, p/3... and cross terms: the strongest peak within
+        ``0.8 .. 1.25 × nnum`` (prominence >= :data:`MIN_PEAK_STRENGTH`), taken down to the
+        largest period p·k whose peak is as prominent, is the answer when it lies within
+        :data:`PERIOD_TOLERANCE` of ``nnum``; else the lowest-frequency peak of prominence >=
+        :data:`FAR_PEAK_STRENGTH` (and half the strongest) over the whole range, failing
+        that the period near ``nnum``. None when the frames are too small (< 4 lenslets of
+        ``nnum`` per side), differ in shape, hold NaN or infinite values, or hold no trusted
+        lattice peak.
+    """
     frames = [np.asarray(f) for f in list(frames)[:max_frames]]
     if not frames or min(frames[0].shape) < 4 * nnum or any(
             f.shape != frames[0].shape or (f.dtype.kind == "f" and not np.isfinite(f).all())
@@ -74,19 +100,69 @@ def lattice_period(frames, nnum: int, max_frames: int = 9) -> tuple[float, float
     fy = np.fft.fftfreq(side)[:, None]
     fx = np.fft.rfftfreq(side)[None, :]
     rad = np.hypot(fy, fx)
-    ring = (rad >= 1 / (1.25 * nnum)) & (rad <= 1 / (0.8 * nnum))
+    longest = min(MAX_NNUM, min(_CROP, min(frames[0].shape)) / 4)
+    ring = (rad >= 1 / longest) & (rad <= 1 / _MIN_PERIOD)
     # prominence over the local background (the scene's own spectrum falls steeply with
-    # frequency and would otherwise win at the ring's low end): ~4 main lobes of the window
+    # frequency and would otherwise win at low frequencies): ~4 main lobes of the window
     lobe = 4 * side / min(_CROP, min(frames[0].shape))
     background = ndimage.uniform_filter(power, size=int(4 * lobe) | 1, mode="wrap")
     prominence = power / (background + 1e-300 + 1e-12 * float(power.max()))
     tan = math.tan(math.radians(30))
-    g1, p1 = _peak(prominence, ring & (fx > 0) & (np.abs(fy) < fx * tan), side)
-    g2, p2 = _peak(prominence, ring & (np.abs(fx) < np.abs(fy) * tan), side)
-    strength = min(p1, p2)
-    if strength < MIN_PEAK_STRENGTH:
-        return None
-    return 2.0 / (np.hypot(*g1) + np.hypot(*g2)), float(strength)
+    wedges = (fx > 0) & (np.abs(fy) < fx * tan), np.abs(fx) < np.abs(fy) * tan
+    near = None
+    found = []
+    for wedge in wedges:  # the configured period first: its peak, taken down to its fundamental
+        g, strength = _peak(prominence, (rad >= 1 / (1.25 * nnum)) & (rad <= 1 / (0.8 * nnum))
+                            & wedge, side)
+        if strength < MIN_PEAK_STRENGTH:
+            break
+        found.append(_fundamental(prominence, g, strength, 1 / longest, side))
+    if len(found) == 2:
+        (g1, p1), (g2, p2) = found
+        near = 2.0 / (np.hypot(*g1) + np.hypot(*g2)), float(min(p1, p2))
+        if abs(near[0] - nnum) <= PERIOD_TOLERANCE * nnum:
+            return near
+    # another period (or a harmonic or cross term of one near nnum): the lowest strong peak
+    found = []
+    for wedge in wedges:
+        strength = float(prominence[ring & wedge].max())
+        if strength < FAR_PEAK_STRENGTH:
+            return near
+        strong = prominence >= max(FAR_PEAK_STRENGTH, strength / 2)
+        found.append(_lowest_peak(prominence, ring & wedge & strong, rad, lobe, side))
+    (g1, p1), (g2, p2) = found
+    return 2.0 / (np.hypot(*g1) + np.hypot(*g2)), float(min(p1, p2))
+
+
+def _fundamental(prominence: np.ndarray, g: np.ndarray, strength: float, lowest: float,
+                 side: int) -> tuple[np.ndarray, float]:
+    """(frequency, prominence) of the fundamental of the lattice peak at ``g`` (cycles/px):
+    ``g / k`` for the largest ``k`` (frequencies down to ``lowest``) whose peak within two bins
+    is at least :data:`FAR_PEAK_STRENGTH` and three quarters of ``strength`` (a lattice's
+    fundamental is as prominent as its harmonics; a scene's own periodic structure is weaker)."""
+    best = (g, strength)
+    for k in range(2, int(np.hypot(*g) / lowest) + 1):
+        iy, ix = (int(round(v)) for v in g / k * side)
+        sel = np.zeros(prominence.shape, bool)
+        sel[np.arange(iy - 2, iy + 3) % side, max(ix - 2, 0):ix + 3] = True
+        got = _peak(prominence, sel, side)
+        if got[1] >= max(FAR_PEAK_STRENGTH, 0.75 * strength):
+            best = got
+    return best
+
+
+def _lowest_peak(prominence: np.ndarray, strong: np.ndarray, rad: np.ndarray, lobe: float,
+                 side: int) -> tuple[np.ndarray, float]:
+    """The lattice peak of lowest frequency among the ``strong`` bins: the fundamental (in a
+    wedge of +-30 degrees about an axis the lattice's nearest peak is its axis's first; its
+    harmonics and the cross terms lie farther out), found within half a window lobe of the
+    lowest strong bin."""
+    k = int(np.argmin(np.where(strong, rad, np.inf)))
+    iy, ix = np.unravel_index(k, rad.shape)
+    half = max(2, int(lobe / 2))
+    sel = np.zeros(rad.shape, bool)
+    sel[np.arange(iy - half, iy + half + 1) % side, max(ix - half, 0):ix + half + 1] = True
+    return _peak(prominence, sel & (rad > 0), side)
 
 
 def _tile_phase(tile: np.ndarray, g: np.ndarray, centre: np.ndarray) -> np.ndarray:
