@@ -10,6 +10,7 @@ import json
 
 import lf_synth as ls
 import numpy as np
+import pytest
 from typer.testing import CliRunner
 
 import metasensor as ms
@@ -102,8 +103,9 @@ def test_realign_with_calibration_names_the_bad_frame(tmp_path):
 
 def test_single_frame_calibration_leaves_room_for_the_stage_steps():
     # from one frame the offsets are nominal: a 2-px margin keeps realign working when the
-    # stage's actual step differs (phase (4, 4) displaced by 2 px here; with no margin realign
-    # stopped: "lenslet blocks leave the sensor"); measured offsets keep every lenslet
+    # stage's actual step differs (phase (4, 4) displaced by 1 px here; with no margin realign
+    # stopped: "lenslet blocks leave the sensor"); measured offsets keep every lenslet. A
+    # displacement beyond half the 3-px scan step puts the frame nearer another phase: refused
     from metasensor.sensor.rectify import rectify_frames
     from metasensor.sensor.reuse import frame_offset
 
@@ -111,10 +113,16 @@ def test_single_frame_calibration_leaves_room_for_the_stage_steps():
     assert calibrate(white[0], N, frames=white, scan=5).lenslets == (12, 12)
     calib = calibrate(white[0], N, scan=5)
     assert calib.lenslets == (10, 10)
-    frames = white.copy()
-    frames[24] = np.roll(frames[24], (2, 2), (0, 1))
-    frames[24][:2] = 0
-    frames[24][:, :2] = 0
-    out = list(rectify_frames(list(frames), calib, ORDER,
-                              offsets=lambda f, fr, ph: frame_offset(fr, calib, ph, index=f)))
-    assert len(out) == 25 and all(np.isfinite(o).all() for o in out)
+    for shift in (1, 2):
+        frames = white.copy()
+        frames[24] = np.roll(frames[24], (shift, shift), (0, 1))
+        frames[24][:shift] = 0
+        frames[24][:, :shift] = 0
+        out = rectify_frames(list(frames), calib, ORDER,
+                             offsets=lambda f, fr, ph: frame_offset(fr, calib, ph, index=f))
+        if shift == 1:
+            out = list(out)
+            assert len(out) == 25 and all(np.isfinite(o).all() for o in out)
+        else:
+            with pytest.raises(ValueError, match=r"^frame 24 sits 2\.0 px from its nominal"):
+                list(out)

@@ -4,6 +4,7 @@ input files are never modified (checksums before/after)."""
 from __future__ import annotations
 
 import hashlib
+import re
 
 import lf_synth as ls
 import numpy as np
@@ -222,3 +223,43 @@ def test_config_checks_against_what_the_frames_store(tmp_path):
     assert res.exit_code == 0, res.output
     res = run("realign", tmp_path / "g.tif", "--out", tmp_path / "x.tif")
     assert res.exit_code != 0 and "old_field" in str(res.exception)
+
+
+def test_realign_refuses_frames_in_another_scan_order(capture, tmp_path):
+    """Serpentine frames realigned in the default row-major order: frames 3 and 5 measure 5 px
+    (more than half the 5-px scan step) from their nominal phases. Exit 2, one line naming
+    them and the order they fit; the right order realigns."""
+    root = capture["root"]
+    res = run("calibrate", root / "white.tif", "--out", tmp_path / "calib.toml", "--no-flat")
+    assert res.exit_code == 0, res.output
+    res = run("realign", root / "raw.tif", "--calib", tmp_path / "calib.toml", "--scan", 3,
+              "--out", tmp_path / "v.tif")
+    assert isinstance(res.exception, ValueError), res.output
+    msg = str(res.exception)
+    assert "\n" not in msg and re.match(r"frames 3, 5 sit [45]\.\d px", msg) and msg.endswith(
+        "not in row-major order (they fit serpentine); pass --scan-order serpentine"), msg
+    assert not (tmp_path / "v.tif").exists()
+    res = run("realign", root / "raw.tif", "--calib", tmp_path / "calib.toml", "--scan", 3,
+              "--order", "serpentine", "--out", tmp_path / "v.tif")
+    assert res.exit_code == 0, res.output
+
+
+def test_realign_refuses_a_later_frame_off_its_phase(capture, tmp_path):
+    """The second scan period taken in reverse: frame 9 (phase (0, 0)) holds phase (2, 2)."""
+    raw = capture["raw"][:9]
+    write_raw(tmp_path / "raw18.tif", np.concatenate([raw, raw[::-1]]))
+    res = run("calibrate", capture["root"] / "white.tif", "--out", tmp_path / "calib.toml",
+              "--no-flat")
+    assert res.exit_code == 0, res.output
+    res = run("realign", tmp_path / "raw18.tif", "--calib", tmp_path / "calib.toml", "--scan",
+              3, "--order", "serpentine", "--out", tmp_path / "v.tif")
+    assert isinstance(res.exception, ValueError), res.output
+    assert re.match(r"frame 9 sits [45]\.\d px from its nominal", str(res.exception))
+
+
+def test_calibrate_refuses_frames_in_another_scan_order(capture, tmp_path):
+    res = run("calibrate", capture["root"] / "raw.tif", "--scan", 3, "--out",
+              tmp_path / "c.toml", "--no-flat")
+    assert isinstance(res.exception, ValueError), res.output
+    assert "(they fit serpentine); pass --scan-order serpentine" in str(res.exception)
+    assert not (tmp_path / "c.toml").exists()

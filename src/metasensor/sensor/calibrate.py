@@ -29,7 +29,7 @@ from scipy import fft as sfft
 from scipy import ndimage
 
 from metasensor.sensor.calibration import Calibration
-from metasensor.sensor.checks import lattice_residual
+from metasensor.sensor.checks import check_scan_offsets, lattice_residual
 
 __all__ = ["find_grid", "measure_offsets", "calibrate", "flat_field"]
 
@@ -348,6 +348,7 @@ def calibrate(white, nnum: int, frames=None, scan: int = 1, scan_order=None,
             k0 = order.index((0, 0))
             grid["point"] = grid["point"] + meas[k0]  # phase (0, 0) of this scan is the origin
             offsets = [tuple(o - meas[k0]) for o in meas]
+            check_scan_offsets(offsets, order, m, nnum, scan)
         else:
             offsets = [(0.0, 0.0)] * len(order)
     shifts = offsets if offsets is not None else nominal

@@ -22,7 +22,7 @@ from scipy import ndimage
 from metasensor.config import MAX_NNUM
 
 __all__ = ["lattice_period", "lattice_residual", "PERIOD_TOLERANCE", "MIN_PEAK_STRENGTH",
-           "FAR_PEAK_STRENGTH", "MAX_RESIDUAL_PX"]
+           "FAR_PEAK_STRENGTH", "MAX_RESIDUAL_PX", "check_scan_offsets"]
 
 PERIOD_TOLERANCE = 0.02  # realign refuses frames whose period differs more from nnum
 MIN_PEAK_STRENGTH = 12.0  # a lattice peak less prominent than this is not trusted
@@ -214,3 +214,73 @@ def lattice_residual(image: np.ndarray, g: np.ndarray, point: np.ndarray,
         return float("nan"), int(keep.sum())
     dev = np.array([f[1] for f, k in zip(found, keep, strict=True) if k])
     return float(np.sqrt(np.mean(np.sum(dev**2, axis=1)))), int(keep.sum())
+
+
+def check_scan_offsets(measured, order, matrix, nnum: int, scan: int, start_phase: int = 0,
+                       first: int = 0) -> None:
+    """Refuse frames whose measured grid offsets contradict their scan phases.
+
+    A frame whose measured offset lies more than half a scan step (``nnum // scan / 2``
+    rectified px, along either lattice axis) from its phase's nominal offset sits nearer
+    another phase: the frames were not taken in ``order`` (or the stage did not step as
+    configured), and realigning them would put each such frame's samples in another phase's
+    place.
+
+    Parameters
+    ----------
+    measured : array_like
+        ``(F, 2)`` measured offsets [sensor px] of frames ``first .. first + F - 1`` from the
+        calibration's phase (0, 0); frame ``f`` has phase ``order[(f + start_phase) % T]``.
+    order : sequence of (int, int)
+        The scan order the frames are realigned in.
+    matrix : array_like
+        The calibration's rectified → sensor matrix (``Calibration.matrix``).
+    nnum, scan : int
+        Pixels per lenslet and scan period.
+    start_phase, first : int
+        Index in ``order`` of frame 0, and the number of the first measured frame.
+
+    Raises
+    ------
+    ValueError
+        One line naming the frames and how far they sit; when the frames cover a whole period
+        and another preset order places every one within half a step, it names that order.
+    """
+    from metasensor.sensor.scan import PRESETS, scan_order
+
+    measured = np.asarray(measured, float)
+    step = nnum // scan
+    slots = [(first + f + start_phase) % len(order) for f in range(len(measured))]
+    rect = np.linalg.solve(np.asarray(matrix, float), measured.T).T
+
+    def deviation(phases):  # rectified px from the nominal offset, nearest lattice translate
+        dev = rect - step * np.array([phases[k] for k in slots], float)
+        return dev - nnum * np.round(dev / nnum)
+
+    dev = deviation(list(order))
+    bad = np.flatnonzero(np.abs(dev).max(axis=1) > step / 2)
+    if bad.size == 0:
+        return
+    names = [k for k in PRESETS if scan_order(scan, k) == list(order)]
+    used = f"{names[0]} order" if names else "the given scan order"
+    fits = [k for k in PRESETS if not names or k != names[0]] if len(measured) == len(order) \
+        else []
+    fits = [k for k in fits if np.abs(deviation(scan_order(scan, k))).max() <= step / 2]
+    far = float(np.abs(dev[bad] @ np.asarray(matrix, float).T).max())
+    frames = _runs([first + int(f) for f in bad])
+    where = "sit {:.1f} px from their nominal phases" if len(bad) > 1 else \
+        "sits {:.1f} px from its nominal phase"
+    hint = (f" (they fit {fits[0]}); pass --scan-order {fits[0]}" if fits else
+            "; pass the order they were taken in (--scan-order), or check the stage's steps")
+    raise ValueError(f"{frames} {where.format(far)} (more than half the {step}-px scan step): "
+                     f"the frames are not in {used}{hint}")
+
+
+def _runs(numbers: list[int]) -> str:
+    """``frames 5–9, 15–19`` (``frame 7`` for one)."""
+    parts, start = [], numbers[0]
+    for a, b in zip(numbers, numbers[1:] + [None], strict=True):
+        if b != a + 1:
+            parts.append(f"{start}" if start == a else f"{start}–{a}")
+            start = b
+    return ("frames " if len(numbers) > 1 else "frame ") + ", ".join(parts)

@@ -229,10 +229,9 @@ def _rectified(stream, raw, calib, cfg, phases, moving, offsets, start_phase, me
     calib = adapt(calib, cfg.scan, phases, moving)
     off = offsets if offsets != "calib" else None
     if offsets == "measure" and moving == "mla":
-        from metasensor.sensor.reuse import frame_offset
+        from metasensor.sensor.reuse import checked_offsets
 
-        def off(f, frame, phase):
-            return frame_offset(frame, calib, phase, index=f)
+        off = checked_offsets(calib, start_phase)
     elif offsets == "measure":
         off = "nominal"
     stream = rectify_frames(stream, calib, phases, offsets=off, start_phase=start_phase,
