@@ -188,3 +188,11 @@ def test_true_zernike_reported(standin):
     uni = simulate(np.ones((132, 132), np.float32), CFG, zernike=[0, 0, 0, 0.5], scan=3,
                    comparison=False)
     np.testing.assert_allclose(uni.zernike, [0, 0, 0, 0.5])
+
+
+@pytest.mark.parametrize("kw", [dict(nnum=13, scan=3), dict(nnum=15, scan=5)])
+def test_image_scan_config_refused_up_front_naming_the_image_scan_simulator(kw):
+    cfg = ms.SystemConfig(moving="image", **kw)  # the README's 13-px, 3 x 3 example among them
+    with pytest.raises(ValueError, match=r"moving MLA.*simulate_image_scan") as err:
+        simulate(np.ones((150, 150), np.float32), cfg, comparison=False)
+    assert "\n" not in str(err.value)

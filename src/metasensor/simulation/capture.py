@@ -175,6 +175,9 @@ def simulate(scene, cfg: SystemConfig, zernike=None, field_zernike=None, depth=N
              progress: bool = False, focus_offset: float = 0.0) -> Capture:
     """Simulate one scan period of raw frames of ``scene`` (H, W) (see the module docstring).
 
+    cfg: a moving-MLA system (``cfg.moving == "mla"``; an image scanned over a fixed MLA is
+    refused: :func:`metasensor.simulation.image_scan.simulate_image_scan` simulates those).
+
     zernike: Noll vector [waves] for the whole field; field_zernike: (by, bx, J) vectors at block
     centres or a callable of normalised field coordinates (evaluated on ``field_blocks``), added
     to ``zernike``; depth: scalar or (H, W) map [m, image side] (layered, ``depth_planes``);

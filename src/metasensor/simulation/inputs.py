@@ -134,6 +134,10 @@ def check_inputs(scene, cfg: SystemConfig, zernike, scan, scan_order, opts: dict
     focus = np.array([0.0, 0.0, 0.0, float(focus_offset)]) if focus_offset else None
     if not isinstance(cfg, SystemConfig):
         raise TypeError(f"cfg must be a SystemConfig, got {type(cfg).__name__}")
+    if cfg.moving != "mla":  # its frames and views follow the moving MLA's geometry only
+        raise ValueError("ms.simulate models a moving MLA (cfg.moving='mla'); for "
+                         f"moving={cfg.moving!r} use "
+                         "metasensor.simulation.image_scan.simulate_image_scan")
     scene = place_scene(check_scene(scene), opts["sensor_shape"])
     cfg, order = _sampling(cfg, scan, scan_order, opts["bit_depth"])
     n, p, d = cfg.nnum, cfg.scan, cfg.scan_step_px
