@@ -394,7 +394,7 @@ def test_a_diverging_update_is_refused_with_one_warning(monkeypatch):
     assert ray_reach_px(cfg, np.eye(45)[44] * 80.0 / 4, cfg.view_mask()) > 200
     with pytest.warns(RuntimeWarning, match="DAO stopped after 0 update") as rec:
         res = run_dao(views, cfg, method="wave", max_iter=3, init=np.eye(45)[3] * 0.05)
-    assert len(rec) == 1
+    assert len([w for w in rec if w.category is RuntimeWarning]) == 1  # (and the modes' own)
     assert res.history == [] and np.allclose(res.zernike, np.eye(45)[3] * 0.05)
 
 

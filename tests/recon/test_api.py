@@ -91,7 +91,7 @@ def test_dao_methods_use_estimated_aberration(capture, bank, monkeypatch):
     views, _ = capture
     calls = []
 
-    def run_dao(block_views, cfg, options, init=None, device=None):
+    def run_dao(block_views, cfg, options, init=None, device=None, view_mask=None):
         calls.append((block_views.shape, options, init))
         z = np.zeros(45)
         z[4] = 0.1 * len(calls)
@@ -154,7 +154,7 @@ def test_wave_dao_bank_uses_the_used_views_window(capture, bank, monkeypatch):
     z = np.zeros(45)
     z[4] = 0.5
 
-    def run_dao(window, cfg, options, init=None, device=None):
+    def run_dao(window, cfg, options, init=None, device=None, view_mask=None):
         return DaoResult(zernike=z, history=[1.0], shifts=np.zeros((15, 15, 2)), method="wave",
                          psf_size=banks.psf_window(cfg, z, cfg.view_mask()))
 

@@ -42,7 +42,7 @@ def _fake_dao(monkeypatch, bank, fit_px):
     z = np.zeros(45)
     z[4] = 0.3
 
-    def run_dao(window, cfg, options, init=None, device=None):
+    def run_dao(window, cfg, options, init=None, device=None, view_mask=None):
         return DaoResult(zernike=z, history=[0.3, 0.01], shifts=np.zeros((15, 15, 2)),
                          method="wave", fits=[1.5, fit_px])
 

@@ -14,8 +14,9 @@ Alternate, starting from φ = ``init`` (or 0):
 3. s_uv = shift of V_uv against the prediction of the same phase-space operator the
    reconstruction fits (:meth:`DaoBlock.measure`; sub-sample cross-correlation weighted by the
    known region of each view sample, not in the paper), clipped to ``max_shift_px``;
-4. fit the shifts by Zernike modes 4–45 plus a common offset (:mod:`metasensor.dao.wavefront`;
-   each view weighted by the precision of its shift, not in the paper), add the fit to φ.
+4. fit the shifts by Zernike modes (4–45, or the leading set the views used determine:
+   :mod:`metasensor.dao.modes`) plus a common offset (:mod:`metasensor.dao.wavefront`; each
+   view weighted by the precision of its shift, not in the paper), add the fit to φ.
    Stop when the r.m.s. of the update is below ``tol`` (0 runs all) or after ``max_iter``
    updates. An update whose wavefront would send the used views' rays beyond ``max_reach_px``
    (:func:`metasensor.dao.banks.ray_reach_px`; it bounds the banks' windows) is shortened to
@@ -33,7 +34,7 @@ each step and default is what it is: ``docs/decisions.md`` (``benchmarks/bench_e
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -43,12 +44,13 @@ from metasensor.backend import as_tensor, resolve_device, to_numpy
 from metasensor.config import SystemConfig
 from metasensor.dao.banks import geometric_psfs, psf_bank, psf_window, ray_reach_px
 from metasensor.dao.block import DaoBlock
+from metasensor.dao.modes import choose_modes
 from metasensor.dao.options import DaoOptions, DaoResult, resolve_options
-from metasensor.dao.wavefront import fit_shifts, gradient_matrix, zernike_rms
+from metasensor.dao.wavefront import DAO_MODES, fit_shifts, gradient_matrix, zernike_rms
 from metasensor.dao.wavefront import predicted_shifts as _predicted
 
 __all__ = ["DaoOptions", "DaoResult", "run_dao", "estimate_block_aberration", "dao_unavailable",
-           "JMAX"]
+           "dao_modes", "JMAX"]
 
 JMAX = 45
 MIN_SAMPLES = 8  # view samples per side a block needs for DAO
@@ -97,23 +99,43 @@ def _used_views(cfg: SystemConfig, view_mask, amplitude, matrix) -> np.ndarray:
         used = used & (amp > 0)
     used = used & (matrix[1] >= 0.5)
     if used.sum() < MIN_VIEWS:
-        raise ValueError(f"only {int(used.sum())} usable views: cannot estimate a wavefront")
+        raise ValueError(_too_few(cfg, used, matrix))
     return used
 
 
+def _too_few(cfg: SystemConfig, used: np.ndarray, matrix) -> str:
+    """One line: too few usable views, which radius they reach, and what would help."""
+    u = np.arange(cfg.nnum) - cfg.center
+    r = np.sqrt(u[:, None] ** 2 + u[None, :] ** 2)
+    reach = float(r[used].max()) if used.any() else 0.0
+    pupil = cfg.pupil_radius_px
+    lit = int((cfg.view_mask(pupil) & (matrix[1] >= 0.5)).sum())
+    hint = (f"pass a larger view_radius (up to {pupil:.2f}: {lit} views)" if lit >= MIN_VIEWS
+            else "this system has too few views to estimate a wavefront")
+    return (f"only {int(used.sum())} usable views within view_radius {reach:.2f} (DAO needs at "
+            f"least {MIN_VIEWS}): {hint}")
+
+
+def dao_modes(cfg: SystemConfig, view_mask=None, modes=None, *, stacklevel: int = 2
+              ) -> tuple[int, ...]:
+    """The Noll modes :func:`run_dao` fits with the views ``view_mask`` (default
+    ``cfg.view_mask()``): :func:`metasensor.dao.modes.choose_modes` of its usable views (it
+    warns when fewer than 4–45 are chosen); ValueError where DAO cannot run with these views."""
+    matrix = gradient_matrix(cfg, jmax=JMAX)
+    return choose_modes(cfg, _used_views(cfg, view_mask, None, matrix), modes, matrix,
+                        stacklevel=stacklevel + 1)
+
+
 def dao_unavailable(cfg: SystemConfig, view_mask=None) -> str | None:
-    """Why :func:`run_dao` cannot estimate a wavefront with this system's views (fewer than
-    ``MIN_VIEWS`` used views whose footprint lies at least half inside the pupil), or None."""
-    used = _used_views_or_none(cfg, view_mask)
-    return None if used is not None else (
-        f"this system has fewer than {MIN_VIEWS} views inside the pupil to estimate it from")
-
-
-def _used_views_or_none(cfg: SystemConfig, view_mask) -> np.ndarray | None:
+    """Why :func:`run_dao` cannot estimate a wavefront with the views ``view_mask`` (default
+    ``cfg.view_mask()``): fewer than ``MIN_VIEWS`` views whose footprint lies at least half
+    inside the pupil, or too few to determine even Noll modes 4–6; None when it can."""
+    matrix = gradient_matrix(cfg, jmax=JMAX)
     try:
-        return _used_views(cfg, view_mask, None, gradient_matrix(cfg, jmax=JMAX))
-    except ValueError:
-        return None
+        choose_modes(cfg, _used_views(cfg, view_mask, None, matrix), None, matrix, warn=False)
+    except ValueError as exc:
+        return str(exc)
+    return None
 
 
 @dataclass
@@ -204,7 +226,7 @@ def _update(run: _Run) -> None:
         return
     run.steps.append(step)
     run.fits.append(fit.residual_rms)
-    run.history.append(zernike_rms(step * fit.zernike, opts.modes))
+    run.history.append(zernike_rms(step * fit.zernike, DAO_MODES))
     run.phi = run.phi + step * fit.zernike
     run.estimates.append(run.phi.copy())
     run.shifts = np.nan_to_num(s_full)
@@ -268,12 +290,17 @@ def run_dao(block_views, cfg: SystemConfig, options: DaoOptions | None = None, *
     Returns
     -------
     DaoResult
+        Its ``modes``: those fitted (``options.modes``, or where None the leading set the used
+        views determine, with a warning when fewer than 4–45: :mod:`metasensor.dao.modes`).
     """
     opts = resolve_options(options, settings)
     v = _check_block(block_views, cfg)
     phi = _initial_phase(init)
     matrix = gradient_matrix(cfg, jmax=JMAX)
     used = _used_views(cfg, view_mask, amplitude, matrix)
+    modes = choose_modes(cfg, used, opts.modes, matrix, stacklevel=3)
+    if modes != opts.modes:
+        opts = replace(opts, modes=modes)
     n = cfg.nnum
     views = as_tensor(v.reshape(n * n, *v.shape[2:])[used.ravel()], resolve_device(device))
     run = _Run(cfg, opts, used, matrix, amplitude, device, DaoBlock(views, cfg, used, opts.lam,
@@ -300,7 +327,8 @@ def run_dao(block_views, cfg: SystemConfig, options: DaoOptions | None = None, *
     image = None if run.image is None else to_numpy(run.image) * run.blk.scale
     return DaoResult(zernike=run.phi, history=run.history, shifts=shifts, method=opts.method,
                      residual_shifts=run.shifts, image=image, fits=run.fits,
-                     psf_size=run.size(run.phi), estimates=run.estimates, steps=run.steps)
+                     psf_size=run.size(run.phi), estimates=run.estimates, steps=run.steps,
+                     modes=opts.modes)
 
 
 def estimate_block_aberration(block_views, cfg: SystemConfig, method: str = "wave", init=None,

@@ -47,8 +47,10 @@ class DaoOptions:
         default 200): an update going beyond is shortened to stay within, or refused where even a
         quarter of it would not. It bounds the banks' windows (about ``2·(reach + margin) + 1``
         pixels) and so their memory.
-    modes : tuple of int
-        Noll modes fitted (default 4–45).
+    modes : tuple of int or None
+        Noll modes fitted; None (default): the largest leading set, up to 4–45, that the views
+        used determine well (:func:`metasensor.dao.modes.choose_modes`, which also refuses
+        given modes the views cannot determine).
     chunk : int
         Views processed together (default 16).
     psf_size : int, "auto" or None
@@ -73,7 +75,7 @@ class DaoOptions:
     lam: float = DEFAULT_LAMBDA
     max_shift_px: float = 50.0
     max_reach_px: float = 200.0
-    modes: tuple = DAO_MODES
+    modes: tuple | None = None
     chunk: int = 16
     psf_size: int | str | None = "auto"
     weigh_views: bool = True
@@ -103,7 +105,12 @@ class DaoOptions:
         if not (size is None or size == "auto" or (
                 isinstance(size, int | np.integer) and size > 0 and size % 2)):
             raise ValueError(f"psf_size must be 'auto', None or a positive odd int, got {size!r}")
-        object.__setattr__(self, "modes", tuple(int(j) for j in self.modes))
+        if self.modes is not None:
+            modes = tuple(int(j) for j in self.modes)
+            if not modes or min(modes) < 1 or max(modes) > max(DAO_MODES):
+                raise ValueError(f"modes must be Noll indices in 1..{max(DAO_MODES)} (or None: "
+                                 f"chosen from the views), got {self.modes!r}")
+            object.__setattr__(self, "modes", modes)
 
 
 @dataclass
@@ -136,6 +143,8 @@ class DaoResult:
     steps : list of float
         The fraction of every fitted update applied: 1, or less where the whole update would
         send the rays beyond twice ``max_shift_px`` (:func:`metasensor.dao.estimate.run_dao`).
+    modes : tuple of int
+        The Noll modes fitted (:func:`metasensor.dao.modes.choose_modes`).
     """
 
     zernike: np.ndarray
@@ -148,6 +157,7 @@ class DaoResult:
     psf_size: int | None = None
     estimates: list[np.ndarray] = field(default_factory=list)
     steps: list[float] = field(default_factory=list)
+    modes: tuple = DAO_MODES
 
 
 def resolve_options(options: DaoOptions | None, settings: dict) -> DaoOptions:

@@ -32,7 +32,7 @@ from metasensor.config import SystemConfig
 from metasensor.recon.block import BlockTask, reconstruct_block
 from metasensor.recon.blocks import Block, block_zernikes, split_blocks
 from metasensor.recon.collect import Collector
-from metasensor.recon.dao_choice import DAO_CHOICES, choose_dao
+from metasensor.recon.dao_choice import DAO_CHOICES, block_dao_options, choose_dao
 from metasensor.recon.options import ReconOptions
 
 __all__ = ["reconstruct", "Reconstruction", "ReconOptions"]
@@ -174,7 +174,7 @@ def _dao_unavailable(method: str, cfg: SystemConfig, opts: ReconOptions) -> str 
         return None
     from metasensor.dao.estimate import dao_unavailable
 
-    return dao_unavailable(cfg)
+    return dao_unavailable(cfg, cfg.view_mask(opts.view_radius))
 
 
 def _resolve_method(method: str, cfg: SystemConfig, zernike, field_zernike, opts: ReconOptions
@@ -252,11 +252,8 @@ def _solver_options(opts: ReconOptions, solver: str, n_views: int, step: int, no
 def _tasks(views, cfg: SystemConfig, method: str, grid, zern, opts: ReconOptions, plan: dict):
     """One keyword-built :class:`BlockTask` per block."""
     import threading
-    from dataclasses import replace
 
-    from metasensor.dao.estimate import DaoOptions
-
-    dao = None if method == "isa" else replace(opts.dao or DaoOptions(), method=method)
+    dao = plan["dao"]
     local = opts.scheduler is None or opts.scheduler in ("threads", "sync")
     ship = not local and isinstance(views, np.ndarray)  # a cluster gets windows, not the stack
     gate = threading.Semaphore(1) if local and (opts.num_workers or 1) > 1 else None
@@ -331,7 +328,9 @@ def reconstruct(views, cfg: SystemConfig, method: str = "isa", zernike=None, fie
     zern = block_zernikes(block_list, shape, grid, zernike, field_zernike)
     from metasensor.phasespace.views import subset_major, view_order
 
-    uv = view_order(cfg.view_mask(opts.view_radius), opts.order)
+    mask = cfg.view_mask(opts.view_radius)
+    uv = view_order(mask, opts.order)
+    dao = block_dao_options(method, cfg, opts.dao, mask, stacklevel=3)
     noise = _noise_model(views, opts, solver)
     solver_opts, subsets = _solver_options(opts, solver, len(uv), d, noise)
     corners = None
@@ -343,7 +342,7 @@ def reconstruct(views, cfg: SystemConfig, method: str = "isa", zernike=None, fie
     return _run(views, cfg, method, grid, zern, opts, {
         "blocks": block_list, "uv": subset_major(uv, subsets), "solver": solver_opts,
         "subsets": subsets, "shape": shape, "t0": t0, "name": solver, "corners": corners,
-        "noise": getattr(solver_opts, "noise_model", None)})
+        "noise": getattr(solver_opts, "noise_model", None), "dao": dao})
 
 
 def _run(views, cfg, method, grid, zern, opts: ReconOptions, plan: dict) -> Reconstruction:

@@ -191,6 +191,13 @@ def probe_window(window: np.ndarray, samples: int) -> np.ndarray:
     return window[:, :, y0:y0 + sy, x0:x0 + sx]
 
 
+def _view_mask(task: BlockTask) -> np.ndarray:
+    """``(nnum, nnum)`` bool: the reconstruction's views (``task.uv``), those DAO measures."""
+    mask = np.zeros((task.cfg.nnum, task.cfg.nnum), dtype=bool)
+    mask[tuple(np.asarray(task.uv, dtype=int).T)] = True
+    return mask
+
+
 def _probe(task: BlockTask, window: np.ndarray, dao, init):
     """With ``dao_negligible``: one DAO update on the ISA image of the block's
     :func:`probe_window` (cheap: no per-view deconvolution, a sub-window), returned when its
@@ -204,7 +211,7 @@ def _probe(task: BlockTask, window: np.ndarray, dao, init):
 
     probe = estimate.run_dao(probe_window(window, task.probe_samples), task.cfg,
                              replace(dao, max_iter=1, isa_below=math.inf), init=init,
-                             device=task.device)
+                             device=task.device, view_mask=_view_mask(task))
     start = np.zeros(0) if init is None else np.asarray(init, np.float64)
     return probe if _negligible(np.asarray(probe.zernike), start, task.dao_negligible) else None
 
@@ -235,7 +242,8 @@ def _bank(task: BlockTask, window: np.ndarray
     dao = replace(task.dao, progress=True) if shown else task.dao
     res = _probe(task, window, dao, init)
     if res is None:  # not negligible (or no probe): the full estimate
-        res = estimate.run_dao(window, task.cfg, dao, init=init, device=task.device)
+        res = estimate.run_dao(window, task.cfg, dao, init=init, device=task.device,
+                               view_mask=_view_mask(task))
     z_est = np.asarray(res.zernike, dtype=np.float32).ravel()
     merged = np.zeros(max(zernike.size, z_est.size), np.float32)
     merged[:z_est.size] = z_est

@@ -196,7 +196,7 @@ def _say_dao(args: ReconstructArgs, inputs) -> None:
     if args.dao == "auto" and not (given or bank):
         from metasensor.dao.estimate import dao_unavailable
 
-        unavailable = dao_unavailable(inputs.config)
+        unavailable = dao_unavailable(inputs.config, inputs.config.view_mask(args.view_radius))
     choice = choose_dao(args.dao, aberration_given=given, bank_given=bank,
                         unavailable=unavailable)
     typer.echo(f"aberration: {choice.reason}", err=True)

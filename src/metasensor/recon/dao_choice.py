@@ -18,7 +18,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-__all__ = ["DAO_CHOICES", "NEGLIGIBLE_RMS", "PROBE_SAMPLES", "DaoChoice", "choose_dao"]
+__all__ = ["DAO_CHOICES", "NEGLIGIBLE_RMS", "PROBE_SAMPLES", "DaoChoice", "choose_dao",
+           "block_dao_options"]
 
 #: what ``method`` / ``--dao`` accept ("none" is "isa": no aberration estimate)
 DAO_CHOICES = ("auto", "none", "isa", "wave", "geometric")
@@ -89,3 +90,21 @@ def choose_dao(mode: str, *, aberration_given: bool, bank_given: bool,
                      f"no aberration given: wave DAO estimates it per block; a block under "
                      f"{NEGLIGIBLE_RMS:g} λ r.m.s. keeps the aberration-free bank "
                      "(--dao none: skip the estimate)")
+
+
+def block_dao_options(method: str, cfg, dao, view_mask, stacklevel: int = 2):
+    """The :class:`metasensor.dao.options.DaoOptions` every block's DAO runs with (None for
+    ``method="isa"``): ``dao`` (default ``DaoOptions()``) with ``method`` and its modes resolved
+    once for the reconstruction's views ``view_mask``
+    (:func:`metasensor.dao.estimate.dao_modes`: where not given, the leading Noll set those
+    views determine, warned once when fewer than 4–45; given modes they cannot determine, and
+    too few views, are refused with a ValueError before any block runs)."""
+    if method == "isa":
+        return None
+    from dataclasses import replace
+
+    from metasensor.dao.estimate import DaoOptions, dao_modes
+
+    base = dao or DaoOptions()
+    modes = dao_modes(cfg, view_mask, base.modes, stacklevel=stacklevel + 1)
+    return replace(base, method=method, modes=modes)
