@@ -4,9 +4,15 @@ import os
 import shutil
 import tempfile
 
-# under pytest-xdist each of the workers gets one thread, so two workers share two cores
+# under pytest-xdist each of the workers gets one thread, so two workers share two cores; a
+# worker sets it for the commands its tests start too (it inherits the controller's 2, and a
+# child on two threads sums in another order than the worker's in-process run of the same
+# command: the widgets' replay tests compare the two bit for bit)
 _THREADS = 1 if "PYTEST_XDIST_WORKER" in os.environ else 2
-os.environ.setdefault("OMP_NUM_THREADS", str(_THREADS))
+if "PYTEST_XDIST_WORKER" in os.environ:
+    os.environ["OMP_NUM_THREADS"] = "1"
+else:
+    os.environ.setdefault("OMP_NUM_THREADS", str(_THREADS))
 # PSF banks of the tests go to a private cache, never into the user's ~/.cache; it is removed
 # when the session ends (up to 1.7 GB per run was left in the temporary folder before)
 _OWN_CACHE = None

@@ -34,6 +34,7 @@ RANGES = {"mla_pitch": (1e-6, 1e-2), "mla_focal": (1e-6, 1.0), "wavelength": (1e
           "magnification": (1e-6, 1e6)}
 MAX_NNUM = 63  # pixels per lenslet (the prototype: 15)
 MAX_NA = 0.95  # image-side numerical aperture (the prototype: 0.05)
+VIEW_RADIUS_FRACTION = 0.8  # the default view mask's radius over the pupil's (6 / 7.5 views)
 _MOVING = ("mla", "image")
 _APODIZATIONS = ("none", "aplanatic")
 
@@ -262,13 +263,15 @@ class SystemConfig:
     def view_mask(self, radius: float | None = None):
         """Boolean (nnum, nnum) mask of the views used for reconstruction.
 
-        ``radius`` is in view units (default: the authors' 6 for nnum = 15, i.e. the pupil
-        radius minus 1.5 views, which keeps the 113 views the paper uses).
+        ``radius`` is in view units (default: ``VIEW_RADIUS_FRACTION`` of the pupil's radius
+        ``pupil_radius_px``: the authors' 6 of 7.5 for nnum = 15, which keeps the 113 views the
+        paper uses; a fraction rather than their 1.5-view margin, so that a smaller lenslet
+        keeps the same share of its pupil, not a cross of 5 views at nnum = 5).
         """
         import numpy as np
 
         if radius is None:
-            radius = max(self.pupil_radius_px - 1.5, 0.0)
+            radius = VIEW_RADIUS_FRACTION * self.pupil_radius_px
         u = np.arange(self.nnum) - self.center
         return (u[:, None] ** 2 + u[None, :] ** 2) <= radius**2 + 1e-9
 

@@ -400,12 +400,14 @@ def test_a_diverging_update_is_refused_with_one_warning(monkeypatch):
 
 def test_an_overshooting_update_is_shortened_to_the_reach(monkeypatch):
     # an update whose whole step sends the rays beyond max_reach_px but a part of it does not
-    # (20 waves of Noll 45: 229 px against 100) is applied as the largest fraction within it
+    # (20 waves of Noll 45: 377 px on the default 37 views against 100) is applied as the
+    # largest fraction within it (the reach is linear in the update)
     from metasensor.dao.banks import ray_reach_px
 
     cfg, views = _forced_noll45(monkeypatch, 20.0, keep_fit=False)
     res = run_dao(views, cfg, method="wave", max_iter=1, max_reach_px=100.0)
-    assert len(res.steps) == 1 and 0.4 < res.steps[0] < 0.45  # 100 / 229 = 0.437
+    fraction = 100.0 / ray_reach_px(cfg, np.eye(45)[44] * 20.0, cfg.view_mask())
+    assert len(res.steps) == 1 and 0.92 * fraction < res.steps[0] < 1.03 * fraction
     reach = ray_reach_px(cfg, res.zernike, cfg.view_mask())
     assert 99.0 < reach <= 100.0
     assert res.history[0] == pytest.approx(20.0 * res.steps[0], rel=1e-9)

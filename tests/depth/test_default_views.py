@@ -19,7 +19,7 @@ def _flat_views(cfg, level_of):
     return np.broadcast_to(level_of(r)[:, :, None, None], (cfg.nnum, cfg.nnum, 8, 8)).copy()
 
 
-@pytest.mark.parametrize("nnum, configured", [(5, 5), (9, 29), (15, 113)])
+@pytest.mark.parametrize("nnum, configured", [(5, 13), (9, 37), (15, 113)])
 def test_a_full_grid_of_lit_views_is_used_and_warned(nnum, configured):
     cfg = ms.SystemConfig(nnum=nnum, scan=1)
     assert cfg.view_mask().sum() == configured
@@ -61,7 +61,7 @@ def test_dark_or_empty_configured_views_keep_the_configured_mask():
 
 def test_estimate_on_a_rendered_5x5_light_field_uses_all_views_by_default():
     """The default on a full 5 x 5 grid equals the all-views estimate, bit for bit, and reports
-    the views it used; the configuration's 5-view cross alone is far worse on occlusions."""
+    the views it used; the configuration's 13 views alone are worse on occlusions."""
     sv = benchmark_scene("occluders", nnum=5, size=64, max_disparity=3.0, snr_db=30.0, seed=1)
     with pytest.warns(UserWarning, match="beyond the configured pupil"):
         res = ms.estimate_depth(sv.views, sv.config)
@@ -73,7 +73,7 @@ def test_estimate_on_a_rendered_5x5_light_field_uses_all_views_by_default():
     inner = (slice(8, -8), slice(8, -8))
     err_full = np.mean((full.disparity - sv.disparity)[inner] ** 2)
     err_cross = np.mean((cross.disparity - sv.disparity)[inner] ** 2)
-    assert err_full < 0.5 * err_cross
+    assert err_full < 0.9 * err_cross
 
 
 def test_a_given_mask_is_kept_without_a_warning():

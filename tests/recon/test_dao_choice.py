@@ -30,7 +30,7 @@ def test_auto_without_views_to_estimate_from_says_so_and_runs_plain_isa():
     from metasensor.recon.api import _resolve_method
     from metasensor.recon.options import ReconOptions
 
-    small = ms.SystemConfig(nnum=5, scan=5, na=0.04)  # one view inside the pupil
+    small = ms.SystemConfig(nnum=5, scan=5, na=0.02)  # one view in the default mask
     assert dao_unavailable(ms.SystemConfig()) is None
     reason = dao_unavailable(small)
     assert reason and "views" in reason

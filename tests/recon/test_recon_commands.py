@@ -60,8 +60,8 @@ def test_reconstruct_cli_writes_image_and_figure(files):
                                    str(files / "psf.h5"), "--iterations", "1", "--out", str(out)])
     assert res.exit_code == 0, res.output
     assert not (out / "image.zarr").exists()
-    # default radius for nnum 5: pupil radius 2.5 - 1.5 = 1, the centre view and 4 neighbours
-    assert json.loads((out / "summary.json").read_text())["views_used"] == 5
+    # default radius for nnum 5: 0.8 of the pupil radius 2.5 = 2, the views within 2 of the centre
+    assert json.loads((out / "summary.json").read_text())["views_used"] == 13
     # view selection by pupil radius: radius 2 keeps 13 views
     res = CliRunner().invoke(app, ["reconstruct", str(files / "views.tif"), "--psf",
                                    str(files / "psf.h5"), "--iterations", "1", "--view-radius",

@@ -1,16 +1,16 @@
 """The views a depth estimate uses by default: the configured pupil, unless the data show more.
 
 :meth:`metasensor.config.SystemConfig.view_mask` keeps the views well inside the main lens's
-pupil (its radius ``NA · f_mla / pitch`` minus 1.5 views: 113 of the meta-imaging sensor's
-15 × 15). A light field from another camera (a rendered or captured grid of 5 × 5 or 9 × 9
-views described by ``SystemConfig(nnum=n, scan=1)``) keeps the sensor's default NA, so that
-mask would keep 5 of 25 or 29 of 81 views although every view carries the scene. Behind a real
-pupil the views beyond its radius are dark (they see no light, or only its rim); so a view
-beyond the configured pupil that is as bright as the views inside it says the configuration's
-pupil is not the data's. Then the default is every lit view (a mean at least
-``LIT_FRACTION`` of the configured views' median), and the estimate warns once, naming the
-counts. Views beyond the pupil are never used where they are dark, so captures that match their
-configuration (the meta-imaging sensor's, the simulator's) keep the configured mask.
+pupil (0.8 of its radius ``NA · f_mla / pitch``: 113 of the meta-imaging sensor's 15 × 15). A
+light field from another camera (a rendered or captured full grid of 5 × 5 or 9 × 9 views
+described by ``SystemConfig(nnum=n, scan=1)``) keeps the sensor's default NA, so that mask
+would leave out views that carry the scene as well as the others. Behind a real pupil the views
+beyond its radius are dark (they see no light, or only its rim); so a view beyond the configured
+pupil that is as bright as the views inside it says the configuration's pupil is not the
+data's. Then the default is every lit view (a mean at least ``LIT_FRACTION`` of the configured
+views' median), and the estimate warns once, naming the counts. Views beyond the pupil are
+never used where they are dark, so captures that match their configuration (the meta-imaging
+sensor's, the simulator's) keep the configured mask.
 """
 
 from __future__ import annotations
