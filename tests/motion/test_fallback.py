@@ -137,3 +137,18 @@ def test_fallback_options_are_validated():
         correct_motion(np.zeros((60, 60), np.float32), ORDER, fallback="yes")
     with pytest.raises(ValueError, match="optical flow"):
         plan_motion(np.zeros((60, 60), np.float32), ORDER, method="registration")
+
+
+def test_the_fallback_warning_names_the_scan_period_used():
+    """A 3 x 3 scan's view corrected as the default configuration's 5 x 5 (a preset name gives
+    no period): the flow fits nowhere, and the one warning says which period was assumed."""
+    from metasensor.motion.synthetic import dynamic_view, rigid_motion
+    from metasensor.sensor.scan import scan_order
+
+    shape = (210, 210)
+    order = scan_order(3, "row-major")
+    view, _ = dynamic_view(natural_scene(shape, 2, 1.0, seed=0), 2, shape, order,
+                           rigid_motion((1.0, 0.6), len(order) // 2))
+    with pytest.warns(UserWarning, match="fell back .* the scan period used is 5") as rec:
+        correct_motion(view, "row-major")
+    assert len(rec) == 1

@@ -308,7 +308,8 @@ def fallback_map(view: np.ndarray, corrected: np.ndarray, period: int,
     if fraction > opt.warn_share:
         warnings.warn(f"motion correction fell back to the reference frame alone on "
                       f"{100 * fraction:.0f} % of the moving region (the flow did not fit "
-                      f"there; resolution is one frame's)", stacklevel=3)
+                      f"there; resolution is one frame's; the scan period used is {period}: "
+                      f"a view of another period needs its own scan order)", stacklevel=3)
     return FallbackMap(weight.astype(np.float32), gate.astype(np.float32), fraction)
 
 
