@@ -217,7 +217,7 @@ def lattice_residual(image: np.ndarray, g: np.ndarray, point: np.ndarray,
 
 
 def check_scan_offsets(measured, order, matrix, nnum: int, scan: int, start_phase: int = 0,
-                       first: int = 0) -> None:
+                       first: int = 0, relative: bool = False) -> None:
     """Refuse frames whose measured grid offsets contradict their scan phases.
 
     A frame whose measured offset lies more than half a scan step (``nnum // scan / 2``
@@ -239,6 +239,9 @@ def check_scan_offsets(measured, order, matrix, nnum: int, scan: int, start_phas
         Pixels per lenslet and scan period.
     start_phase, first : int
         Index in ``order`` of frame 0, and the number of the first measured frame.
+    relative : bool
+        The offsets are known only relative to the first measured frame's (taken at its
+        nominal offset in ``order``): another order is judged with its own first phase there.
 
     Raises
     ------
@@ -255,6 +258,7 @@ def check_scan_offsets(measured, order, matrix, nnum: int, scan: int, start_phas
 
     def deviation(phases):  # rectified px from the nominal offset, nearest lattice translate
         dev = rect - step * np.array([phases[k] for k in slots], float)
+        dev = dev - dev[0] if relative else dev
         return dev - nnum * np.round(dev / nnum)
 
     dev = deviation(list(order))

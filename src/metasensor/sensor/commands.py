@@ -168,6 +168,10 @@ def realign_cmd(
         if calib is None:
             _check_period(raw, cfg, config, raw_path)
         stream = bars.enter_context(tqdm(raw, total=n_frames, desc="realign", unit="frame"))
+        if calib is None and moving == "mla":  # each frame's lattice phase against its place
+            from metasensor.sensor.framephase import phase_checked
+
+            stream = phase_checked(stream, cfg.nnum, cfg.scan, phases, start_phase)
         if calib is not None:
             calib, stream = _rectified(stream, raw, calib, cfg, phases, moving, offsets,
                                        start_phase, method, dtype)
