@@ -137,3 +137,14 @@ def test_reader_declines_foreign_paths(tmp_path, name):
 
     (tmp_path / name).mkdir() if name == "empty" else (tmp_path / name).write_text("x")
     assert get_reader(str(tmp_path / name)) is None
+
+
+def test_a_foreign_prototype_sized_stack_says_its_scan_was_assumed(make_napari_viewer, tmp_path):
+    """A 15 x 15 view stack with no configuration: the reader takes the prototype's 5 x 5 scan
+    for the samples' spacing, and the layer's name says so (a plain 15 x 15 light field would
+    otherwise show 5 times too fine without a word)."""
+    tifffile.imwrite(tmp_path / "lf.tif", np.ones((225, 8, 8), np.float32), metadata=None)
+    viewer = make_napari_viewer()
+    (layer,) = _open(viewer, tmp_path / "lf.tif")
+    assert layer.data.shape == (15, 15, 8, 8)
+    assert layer.name == "lf (scan 5 x 5 assumed)"

@@ -216,11 +216,14 @@ def read_views_file(p) -> tuple:
         spacing = _ome_tiff_spacing(p)
         views = read_views(p, nnum=None if cfg is None else cfg.nnum,
                            mmap=p.stat().st_size > 2**28)
+    name = p.stem
     if cfg is None:  # a foreign stack: nnum from its shape, the prototype's optics otherwise
         nnum = int(views.shape[0])
         cfg = SystemConfig(nnum=nnum, mla_pitch=SystemConfig().pixel_pitch * nnum,
                            scan=_guess_scan(nnum))
-    return L.views_layer(views, cfg, origin=extras.get("origin"), name=p.stem, source=p,
+        if spacing is None and cfg.scan > 1:  # the guess sets the samples' spacing: say so
+            name = f"{p.stem} (scan {cfg.scan} x {cfg.scan} assumed)"
+    return L.views_layer(views, cfg, origin=extras.get("origin"), name=name, source=p,
                          scale_um=spacing)
 
 
