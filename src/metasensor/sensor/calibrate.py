@@ -203,15 +203,15 @@ def find_grid(frame, nnum: int, pitch_range: tuple[float, float] | None = None,
 
 
 def _check_period(crops: list[np.ndarray], nnum: int) -> None:
-    """Refuse frames whose lenslet lattice is measured (:func:`metasensor.sensor.checks.
-    lattice_period`) at a period more than :data:`~metasensor.sensor.checks.PERIOD_TOLERANCE`
-    from ``nnum``: the grid search near ``nnum`` cannot find it, and the error names the size."""
-    from metasensor.sensor.checks import PERIOD_TOLERANCE, lattice_period
+    """Refuse frames whose lenslet period contradicts ``nnum``
+    (:func:`metasensor.sensor.checks.period_mismatch`): the grid search near ``nnum`` cannot
+    find it, and the error names the size."""
+    from metasensor.sensor.checks import period_mismatch
 
-    got = lattice_period(crops, nnum)
-    if got is not None and abs(got[0] - nnum) > PERIOD_TOLERANCE * nnum:
-        raise ValueError(f"the frame's lenslet period measures {got[0]:.2f} px but nnum is "
-                         f"{nnum}; set nnum = {round(got[0])} if the lenslets are that size")
+    got = period_mismatch(crops, nnum)
+    if got is not None:
+        raise ValueError(f"the frame's lenslet period measures {got:.2f} px but nnum is "
+                         f"{nnum}; set nnum = {round(got)} if the lenslets are that size")
 
 
 def _brightest_phase(img: np.ndarray, point: np.ndarray, g: np.ndarray, pitch: float):

@@ -22,7 +22,7 @@ from scipy import ndimage
 from metasensor.config import MAX_NNUM
 
 __all__ = ["lattice_period", "lattice_residual", "PERIOD_TOLERANCE", "MIN_PEAK_STRENGTH",
-           "FAR_PEAK_STRENGTH", "MAX_RESIDUAL_PX", "check_scan_offsets"]
+           "FAR_PEAK_STRENGTH", "MAX_RESIDUAL_PX", "check_scan_offsets", "period_mismatch"]
 
 PERIOD_TOLERANCE = 0.02  # realign refuses frames whose period differs more from nnum
 MIN_PEAK_STRENGTH = 12.0  # a lattice peak less prominent than this is not trusted
@@ -133,6 +133,20 @@ def lattice_period(frames, nnum: int, max_frames: int = 9) -> tuple[float, float
     (g1, p1), (g2, p2) = found
     return 2.0 / (np.hypot(*g1) + np.hypot(*g2)), float(min(p1, p2))
 
+
+
+def period_mismatch(frames, nnum: int) -> float | None:
+    """The frames' measured lenslet period [px] (:func:`lattice_period`, at most 9 frames) where
+    it contradicts ``nnum``, else None (it agrees, or no lattice is measured).
+
+    It contradicts ``nnum`` beyond :data:`PERIOD_TOLERANCE`, or beyond the period resolution of
+    the frames' size (about ``nnum / (2 · side)`` relative) where that is coarser."""
+    frames = [frames[t] for t in range(min(len(frames), 9))]
+    got = lattice_period(frames, nnum)
+    if got is None:
+        return None
+    tolerance = max(PERIOD_TOLERANCE, nnum / (2 * min(np.shape(frames[0])[-2:])))
+    return got[0] if abs(got[0] - nnum) > tolerance * nnum else None
 
 def _fundamental(prominence: np.ndarray, g: np.ndarray, strength: float, lowest: float,
                  side: int) -> tuple[np.ndarray, float]:

@@ -297,19 +297,16 @@ def _read_calib(path: Path | None, cfg, sensor_shape):
 
 
 def _check_period(raw, cfg, config, raw_path: Path) -> None:
-    """Without a calibration the frames must be rectified with the configured nnum: their
-    measured lenslet period (:func:`metasensor.sensor.checks.lattice_period`) must agree within
-    2 %, or realignment would silently scramble the views."""
-    from metasensor.sensor.checks import PERIOD_TOLERANCE, lattice_period
+    """Without a calibration the frames must be rectified with the configured nnum: a measured
+    lenslet period that contradicts it (:func:`metasensor.sensor.checks.period_mismatch`) is
+    refused, or realignment would silently scramble the views."""
+    from metasensor.sensor.checks import period_mismatch
 
-    got = lattice_period([raw[t] for t in range(min(len(raw), 9))], cfg.nnum)
-    # a small frame resolves the period only to about nnum / (2 * side) (relative): the
-    # tolerance is the larger of that and the 2 % rule
-    tolerance = max(PERIOD_TOLERANCE, cfg.nnum / (2 * min(raw.shape[-2:])))
-    if got is not None and abs(got[0] - cfg.nnum) > tolerance * cfg.nnum:
+    got = period_mismatch(raw, cfg.nnum)
+    if got is not None:
         source = config if config is not None else "the default configuration"
-        raise ValueError(f"{raw_path}: the frames' lenslet period measures {got[0]:.2f} px but "
-                         f"nnum is {cfg.nnum} ({source}); set nnum = {round(got[0])} in --config "
+        raise ValueError(f"{raw_path}: the frames' lenslet period measures {got:.2f} px but "
+                         f"nnum is {cfg.nnum} ({source}); set nnum = {round(got)} in --config "
                          "if the lenslets are that size, or give --calib for a grid to rectify")
 
 
