@@ -31,7 +31,7 @@ from scipy import ndimage
 from metasensor.sensor.calibration import Calibration
 from metasensor.sensor.checks import check_scan_offsets, lattice_residual
 
-__all__ = ["find_grid", "measure_offsets", "calibrate", "flat_field"]
+__all__ = ["find_grid", "measure_offsets", "lattice_components", "calibrate", "flat_field"]
 
 _MAX_SIDE = 4096  # the grid fit uses at most this central crop per axis (plenty of lenslets)
 
@@ -227,6 +227,20 @@ def _brightest_phase(img: np.ndarray, point: np.ndarray, g: np.ndarray, pitch: f
     return point + 0.5 * (a[0] + a[1]) if off > on else point
 
 
+def lattice_components(frame, g, what: str = "frame") -> tuple[np.ndarray, np.ndarray, float]:
+    """``(centre [px] (2,), values (2,) complex, norm)``: the Hann-windowed DFT of the lit part
+    of the ``(H, W)`` ``frame`` at the lattice frequencies ``g`` ((2, 2), cycles/px, a row
+    each). A lattice point ``c`` has ``g · (c − centre) = −angle(values) / 2π`` (mod 1); ``norm``
+    is the window's weighted sum of the frame (a lattice of full contrast gives about
+    ``norm / 2``). ``what``: the frame's name in error messages."""
+    g = np.asarray(g, float)
+    img = _as_image(frame, what)
+    crop, origin = _crop(img, int(3 / np.hypot(*g[0])))
+    centre = (np.array(crop.shape, float) - 1) / 2 + origin
+    dft = _Dft(crop)
+    return centre, np.array([dft(gk) for gk in g]), dft.norm
+
+
 def measure_offsets(frames, grid: dict, nominal: list[tuple[float, float]],
                     start: int = 0) -> np.ndarray:
     """Grid displacement [sensor px] of every frame from ``grid["point"]`` (the lattice of the
@@ -237,11 +251,8 @@ def measure_offsets(frames, grid: dict, nominal: list[tuple[float, float]],
     ref = np.asarray(grid["point"], float)
     out = []
     for t, frame in enumerate(frames):
-        img = _as_image(frame, f"frame {start + t}")
-        crop, origin = _crop(img, int(3 / np.hypot(*g[0])))
-        centre = (np.array(crop.shape, float) - 1) / 2 + origin
-        dft = _Dft(crop)
-        frac = -np.angle(np.array([dft(gk) for gk in g])) / (2 * np.pi)
+        centre, values, _ = lattice_components(frame, g, f"frame {start + t}")
+        frac = -np.angle(values) / (2 * np.pi)
         # lattice point of this frame: g . (c_t - centre) = frac (mod 1)
         want = g @ (ref + np.asarray(nominal[t], float) - centre)
         frac = frac + np.round(want - frac)

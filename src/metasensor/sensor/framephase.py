@@ -2,9 +2,10 @@
 
 A rectified frame's lenslet lattice has period ``nnum`` along both axes; a moving MLA's scan
 phase (r, c) translates it by ``nnum // scan × (r, c)`` px. The phase of the lattice's
-fundamental Fourier component along each axis (on a central crop of whole periods) gives that
-translation modulo ``nnum``: a frame taken at another phase than its place in the scan order
-shows it. Hand-written on numpy (two dot products per frame).
+fundamental Fourier components on a central crop of the frame
+(:func:`metasensor.sensor.calibrate.lattice_components`, the measurement calibration's frame
+offsets use) gives that translation modulo ``nnum``: a frame taken at another phase than its
+place in the scan order shows it. Only the crop is read, so the check costs little per frame.
 """
 
 from __future__ import annotations
@@ -33,29 +34,30 @@ def lattice_shift(frame, nnum: int) -> tuple[float, float] | None:
     Returns
     -------
     tuple of float or None
-        ``(rows, columns)`` in ``[0, nnum)``: minus the phase of the fundamental of the
-        frame's row and column profiles (a central crop of whole periods, at most 512 px a
-        side) times ``nnum / 2π``. None when the crop is under 4 periods a side or either
-        component's amplitude is below :data:`MIN_CONTRAST` of the crop's summed absolute
-        deviation from its mean (no lattice to measure: dark or lattice-free frames).
+        ``(rows, columns)`` in ``[0, nnum)``: the position of a lattice point, from the phases
+        of the frame's fundamental lattice components on a central crop of at most 512 px a
+        side (:func:`metasensor.sensor.calibrate.lattice_components`). None when the crop is
+        under 4 periods a side, holds non-finite values, or either component is below
+        :data:`MIN_CONTRAST` of the window's weighted sum (no lattice to measure: dark or
+        lattice-free frames).
     """
+    from metasensor.sensor.calibrate import lattice_components
+
     img = np.asarray(frame)
     h, w = img.shape[-2:]
-    side = min(h, w, _CROP) // nnum * nnum
+    side = min(h, w, _CROP)
     if side < 4 * nnum:
         return None
     y0, x0 = (h - side) // 2, (w - side) // 2
-    crop = img[y0:y0 + side, x0:x0 + side].astype(np.float64)
-    crop -= crop.mean()
-    scale = float(np.abs(crop).sum())
-    if not math.isfinite(scale) or scale <= 0:
+    try:
+        centre, values, norm = lattice_components(img[y0:y0 + side, x0:x0 + side],
+                                                  np.eye(2) / nnum)
+    except ValueError:  # non-finite samples
         return None
-    # the crop starts at (y0, x0): a lattice through pixel 0 has phase 0 there too
-    wave = np.exp(-2j * np.pi * (np.arange(side) + np.array([[y0], [x0]])) / nnum)
-    comps = (wave[0] @ crop.sum(axis=1), wave[1] @ crop.sum(axis=0))
-    if min(abs(c) for c in comps) < MIN_CONTRAST * scale:
+    if not (math.isfinite(norm) and norm > 0) or np.abs(values).min() < MIN_CONTRAST * norm:
         return None
-    return tuple(float((-np.angle(c) / (2 * np.pi) * nnum) % nnum) for c in comps)
+    frac = -np.angle(values) / (2 * np.pi)
+    return tuple(float(v) for v in (centre + np.array([y0, x0]) + nnum * frac) % nnum)
 
 
 def phase_checked(frames, nnum: int, scan: int, order, start_phase: int = 0):
