@@ -70,7 +70,7 @@ def phase_checked(frames, nnum: int, scan: int, order, start_phase: int = 0):
     Only a self-consistent measurement is judged: every measured frame within
     :data:`PHASE_TOLERANCE` of a scan step of some phase's nominal offset, the first period's
     frames at distinct phases. A scene can displace a frame's lattice component (sparse
-    defocused points do, by up to half a step); such frames, and those whose lattice cannot be
+    defocused points can); such frames, and those whose lattice cannot be
     measured (all of them when frame 0's cannot be), pass unchecked.
 
     Raises
