@@ -189,3 +189,11 @@ def test_held_out_seeds_are_not_in_the_training_set():
     seeds = held_out_seeds(3)
     used = {s[4] for s in training_specs(TRAINING_SCENES) if s[0] in TRAINING_KINDS}
     assert seeds == (2, 3, 5) and not set(seeds) & used and 4 in used
+
+
+def test_refining_on_another_device_leaves_the_cached_network_where_it_was():
+    net = load_refiner()
+    meta = load_refiner(device="meta")
+    assert meta is not net and meta is load_refiner(device="meta")
+    assert next(net.parameters()).device.type == "cpu"
+    assert next(meta.parameters()).device.type == "meta"

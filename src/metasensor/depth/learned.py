@@ -23,6 +23,7 @@ evaluation scenes.
 
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -138,18 +139,20 @@ def save_refiner(model: EdgeNet | EdgeEnsemble, path: Path) -> None:
     save_state(model, path, **sizes)
 
 
-_CACHE: dict[str, EdgeNet | EdgeEnsemble] = {}
+_CACHE: dict[tuple[str, str], EdgeNet | EdgeEnsemble] = {}
 
 
-def load_refiner(path: str | Path | None = None) -> EdgeNet | EdgeEnsemble:
+def load_refiner(path: str | Path | None = None,
+                 device: str | torch.device = "cpu") -> EdgeNet | EdgeEnsemble:
     """The network (or ensemble of networks) with the weights in ``path`` (default: the shipped
-    :data:`WEIGHTS`), in eval mode, float32, on the CPU."""
+    :data:`WEIGHTS`), in eval mode, float32, on ``device`` (one cached copy per file and device;
+    callers must not move it)."""
     from metasensor.io.weights import packaged_file, read_state
 
     if path is None:
         with packaged_file("metasensor.depth", WEIGHTS) as p:
-            return load_refiner(p)
-    key = str(Path(path).resolve())
+            return load_refiner(p, device)
+    key = (str(Path(path).resolve()), str(torch.device(device)))
     if key not in _CACHE:
         sizes, state = read_state(path)
         if "members" in sizes:
@@ -158,7 +161,7 @@ def load_refiner(path: str | Path | None = None) -> EdgeNet | EdgeEnsemble:
         else:
             model = EdgeNet(sizes["features"], sizes["hidden"])
         model.load_state_dict(state)
-        _CACHE[key] = model.eval().float()
+        _CACHE[key] = model.eval().float().to(device)
     return _CACHE[key]
 
 
@@ -183,8 +186,12 @@ def refine_edges(views: torch.Tensor, au, av, disparity: torch.Tensor,
     """
     out = disparity.clone()
     amax = float(max(np.abs(np.asarray(au)).max(), np.abs(np.asarray(av)).max()))
-    net = model if model is not None else load_refiner(options.weights)
-    net = net.to(views.device)
+    if model is None:
+        net = load_refiner(options.weights, views.device)
+    elif next(model.parameters()).device != views.device:
+        net = copy.deepcopy(model).to(views.device)  # the caller's model is not moved
+    else:
+        net = model
     for _ in range(options.passes):
         samples = edge_samples(views, au, av, out, confidence, jump=options.jump)
         if samples is None:

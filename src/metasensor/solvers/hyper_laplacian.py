@@ -104,7 +104,7 @@ def _unit_table(device: str, dtype: torch.dtype) -> torch.Tensor:
     ``i = 0 … max/step + 1`` (0 where none exists), computed in float64 and stored in
     ``dtype`` on ``device``."""
     n = int(round(UNIT_TABLE_MAX / UNIT_TABLE_STEP)) + 2
-    s = torch.arange(n, dtype=torch.float64) * UNIT_TABLE_STEP
+    s = torch.arange(n, dtype=torch.float64, device="cpu") * UNIT_TABLE_STEP  # on the host
     w, exists = _stationary_two_thirds(s, 1.0)
     return torch.where(exists, w, torch.zeros_like(w)).to(device=device, dtype=dtype)
 
