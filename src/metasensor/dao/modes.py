@@ -21,7 +21,8 @@ import warnings
 import numpy as np
 
 from metasensor.config import SystemConfig
-from metasensor.dao.wavefront import DAO_MODES, _modes, gradient_matrix
+from metasensor.dao.wavefront import DAO_MODES, gradient_matrix
+from metasensor.optics.zernike import noll_indices
 
 __all__ = ["ORDER_ENDS", "MAX_CONDITION", "fit_condition", "choose_modes"]
 
@@ -127,7 +128,7 @@ def choose_modes(cfg: SystemConfig, used, modes=None, matrix=None, *, warn: bool
                           stacklevel=stacklevel)
         return chosen
     jmax = 45 if matrix is None else matrix[0].shape[-1]
-    given = tuple(int(j) for j in _modes(modes, jmax))
+    given = tuple(int(j) for j in noll_indices(modes, jmax))
     a = _design(cfg, used, given, matrix, 0.5)
     if a.shape[0] < a.shape[1] or np.linalg.matrix_rank(a) < a.shape[1]:
         try:

@@ -17,12 +17,12 @@ given relative to any reference (the centre view, or the current model).
 
 from __future__ import annotations
 
-from collections.abc import Iterable
 from dataclasses import dataclass
 
 import numpy as np
 
 from metasensor.config import SystemConfig
+from metasensor.optics.zernike import noll_indices
 
 __all__ = ["shift_scale", "gradient_matrix", "fit_shifts", "predicted_shifts", "zernike_rms",
            "ShiftFit", "DAO_MODES"]
@@ -34,12 +34,6 @@ def shift_scale(cfg: SystemConfig) -> float:
     """Image pixels of view displacement per unit pupil gradient of W (waves): (λ/NA)/pitch."""
     return cfg.wavelength / cfg.na / cfg.grid_pitch
 
-
-def _modes(modes: Iterable[int], jmax: int) -> np.ndarray:
-    idx = np.unique(np.asarray(list(modes), dtype=int))
-    if idx.size == 0 or idx.min() < 1 or idx.max() > jmax:
-        raise ValueError(f"modes must be Noll indices in 1..{jmax}, got {list(idx)}")
-    return idx
 
 
 def gradient_matrix(cfg: SystemConfig, jmax: int = 45, subsample: int = 7,
@@ -121,7 +115,7 @@ def fit_shifts(shifts, cfg: SystemConfig, mask=None, weights=None, modes=DAO_MOD
     if s.shape != (n, n, 2):
         raise ValueError(f"shifts must have shape ({n}, {n}, 2), got {s.shape}")
     jmax = matrix[0].shape[-1] if matrix is not None else max(45, *(int(j) for j in modes))
-    idx = _modes(modes, jmax)
+    idx = noll_indices(modes, jmax)
     use = cfg.view_mask() if mask is None else np.asarray(mask, dtype=bool)
     if use.shape != (n, n):
         raise ValueError(f"mask must have shape ({n}, {n}), got {use.shape}")

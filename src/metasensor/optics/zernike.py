@@ -22,6 +22,7 @@ from math import factorial
 import numpy as np
 
 __all__ = [
+    "noll_indices",
     "noll_to_nm",
     "zernike_basis",
     "zernike_gradients",
@@ -157,7 +158,25 @@ def wavefront(z, x, y) -> np.ndarray:
     return out
 
 
-def _modes(modes: Iterable[int] | None, jmax: int) -> np.ndarray:
+def noll_indices(modes: Iterable[int] | None, jmax: int) -> np.ndarray:
+    """The distinct Noll indices ``modes`` (None: ``1..jmax``), sorted, checked to lie in
+    ``1..jmax``.
+
+    Parameters
+    ----------
+    modes : iterable of int or None
+    jmax : int
+        The largest Noll index allowed.
+
+    Returns
+    -------
+    numpy.ndarray of int
+
+    Raises
+    ------
+    ValueError
+        Where ``modes`` is empty or holds an index outside ``1..jmax``.
+    """
     if modes is None:
         return np.arange(1, jmax + 1)
     idx = np.asarray(list(modes), dtype=int)
@@ -177,7 +196,7 @@ def fit_zernike(w, x, y, mask=None, jmax: int = 45, modes: Iterable[int] | None 
     if w.shape != x.shape:
         raise ValueError(f"w must have the shape of x {x.shape}, got {w.shape}")
     jmax = _check_jmax(jmax)
-    idx = _modes(modes, jmax)
+    idx = noll_indices(modes, jmax)
     if mask is None:
         mask = (x * x + y * y) <= 1.0
     else:
@@ -204,7 +223,7 @@ def random_zernike(rms: float, modes: Iterable[int] = range(4, 46), jmax: int = 
     jmax = _check_jmax(jmax)
     if not (isinstance(rms, (int, float, np.floating)) and np.isfinite(rms) and rms >= 0):
         raise ValueError(f"rms must be a finite non-negative number, got {rms!r}")
-    idx = _modes(modes, jmax)
+    idx = noll_indices(modes, jmax)
     rng = np.random.default_rng(seed)
     v = rng.standard_normal(idx.size)
     z = np.zeros(jmax)
