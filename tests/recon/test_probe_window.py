@@ -10,8 +10,8 @@ import pytest
 import metasensor as ms
 from metasensor.dao.estimate import DaoOptions, run_dao
 from metasensor.dao.wavefront import zernike_rms
-from metasensor.recon.block import probe_window
 from metasensor.recon.dao_choice import NEGLIGIBLE_RMS, PROBE_SAMPLES
+from metasensor.recon.probe import probe_window
 from metasensor.simulation.scenes import load_scene
 
 

@@ -26,7 +26,7 @@ DAO_CHOICES = ("auto", "none", "isa", "wave", "geometric")
 #: waves r.m.s. (Noll 4-45) under which ``"auto"`` keeps a block's aberration-free bank
 NEGLIGIBLE_RMS = 0.02
 #: view samples per side of the sub-window on which a block's probe decides (larger windows:
-#: :func:`metasensor.recon.block.probe_window`); why: docs/decisions.md ("the cost of the
+#: :func:`metasensor.recon.probe.probe_window`); why: docs/decisions.md ("the cost of the
 #: default reconstruction")
 PROBE_SAMPLES = 160
 

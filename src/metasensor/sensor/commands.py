@@ -150,19 +150,10 @@ def realign_cmd(
 
     guard([raw_path, config, calib_path], [out], lock=False)
     cfg, phases, moving = _stored_settings(raw_path, config, scan, order, moving)
-    tp = len(phases)
     with open_raw(raw_path) as raw, ExitStack() as bars:  # the bar closes on any error
         calib = _read_calib(calib_path, cfg, raw.shape[1:])
         n_frames = len(raw)
-        if n_frames < tp:
-            raise ValueError(f"{raw_path}: {n_frames} frames but one {cfg.scan}x{cfg.scan} scan "
-                             f"period needs {tp}")
-        if not sliding and n_frames % tp:
-            raise ValueError(f"{raw_path}: frame count {n_frames} is not a multiple of the "
-                             f"{cfg.scan}x{cfg.scan} scan ({tp}); use --sliding for a window")
-        n_out = n_frames - tp + 1 if sliding else n_frames // tp
-        names = [out] if n_out == 1 else [out.with_name(f"{out.stem}_{k:05d}{out.suffix}")
-                                          for k in range(n_out)]
+        names = _stack_names(raw_path, out, n_frames, cfg.scan, len(phases), sliding)
         guard([raw_path, config, calib_path, _flat_input(calib, calib_path)], names,
               lock=[out])  # one lock for the family of numbered stacks
         if calib is None:
@@ -186,6 +177,21 @@ def realign_cmd(
                                 names, cfg, meta, flat, dtype, start_phase)
     typer.echo(f"-> {written[0]}" + (f" ... {written[-1]} ({len(written)} stacks)"
                                      if len(written) > 1 else ""))
+
+
+def _stack_names(raw_path: Path, out: Path, n_frames: int, scan: int, tp: int,
+                 sliding: bool) -> list[Path]:
+    """The view stacks' paths (``OUT``, or ``OUT_00000`` ... for several), after checking that
+    ``n_frames`` hold whole scan periods of ``tp`` frames (or at least one, ``sliding``)."""
+    if n_frames < tp:
+        raise ValueError(f"{raw_path}: {n_frames} frames but one {scan}x{scan} scan period "
+                         f"needs {tp}")
+    if not sliding and n_frames % tp:
+        raise ValueError(f"{raw_path}: frame count {n_frames} is not a multiple of the "
+                         f"{scan}x{scan} scan ({tp}); use --sliding for a window")
+    n_out = n_frames - tp + 1 if sliding else n_frames // tp
+    return [out] if n_out == 1 else [out.with_name(f"{out.stem}_{k:05d}{out.suffix}")
+                                     for k in range(n_out)]
 
 
 def _write_stacks(stacks, names, cfg, meta, flat, dtype, start_phase):
