@@ -8,6 +8,14 @@ every disparity the views can show (the outermost view moves by at most a quarte
 side, and by at most :data:`MAX_SPAN` view px per view step), with candidates half a coarse
 pixel apart at the outermost view; the span is what the confident coarse estimates cover
 (0.2-99.8 percentiles) plus a margin of two coarse candidate steps and 5 % of that width.
+Coarse speckles (segments of at most ``SPAN_SPECKLE`` coarse pixels whose disparities differ
+by at most one coarse pixel at the outermost view between neighbours,
+:func:`metasensor.depth.speckle.speckle_mask`) do not count: a disparity the scene holds
+covers a connected region, while a periodic or weak texture gives isolated pixels a wrong
+minimum anywhere in the wide search, and each would stretch the fine sweep (and the reach of
+its wrong minima) to the search's ends. They are left out on a side of the span only where
+they alone stretch it by more than a coarse candidate step. A structure too small to count is
+found by the saturation test below.
 After the fine sweep, :func:`saturation` says how much of the estimate still falls at an end
 of the span (then the span is widened, :func:`widened`, or, when it was given, a warning says
 so, :func:`check_given_span`). :func:`initial_span` and :func:`sweep_candidates` give
@@ -29,6 +37,7 @@ from metasensor.depth import geometry
 from metasensor.depth.cost import CostVolume
 from metasensor.depth.refine import peak_ratio_confidence, subpixel_minimum
 from metasensor.depth.sgm import normalise_costs, semi_global
+from metasensor.depth.speckle import Speckles, speckle_mask
 
 __all__ = ["MAX_SPAN", "SpanEstimate", "check_given_span", "initial_span", "measure_span",
            "saturation", "sweep_candidates", "widened"]
@@ -41,6 +50,7 @@ MIN_CANDIDATES = 64  # the automatic candidate count, at least
 OUTER_STEP = 0.5  # automatic candidate spacing: the outermost view moves this many view px
 COARSE_SATURATED = 0.01  # share of saturated coarse estimates above which a warning says so
 SATURATED = 0.001  # share of confident pixels on an end of the span that widens or warns
+SPAN_SPECKLE = 4  # coarse segments of at most this many pixels do not count for the span
 
 
 @dataclass(frozen=True)
@@ -100,7 +110,10 @@ def measure_span(stack: torch.Tensor, au, av, centre: int, minimum: tuple[float,
         conf = peak_ratio_confidence(vol, idx)
         sat = sum(saturation(vol[:, 2:-2, 2:-2], idx[2:-2, 2:-2]))
     b = 2  # the outermost coarse pixels: not counted
-    disp, idx, conf = (t[b:-b, b:-b] for t in (disp, idx, conf))
+    speck = speckle_mask(disp, amax, Speckles(size=SPAN_SPECKLE, step=float(f)))
+    if speck is None:
+        speck = torch.zeros_like(disp, dtype=torch.bool)
+    disp, idx, conf, speck = (t[b:-b, b:-b] for t in (disp, idx, conf, speck))
     good = conf > CONFIDENT
     share = float(good.float().mean())
     beyond = (0.0, 0.0)
@@ -111,7 +124,7 @@ def measure_span(stack: torch.Tensor, au, av, centre: int, minimum: tuple[float,
         if given is not None:  # beyond by more than one coarse candidate step
             beyond = (float(np.mean(vals < given[0] - step)),
                       float(np.mean(vals > given[1] + step)))
-        lo, hi = np.percentile(vals, [0.2, 99.8])
+        lo, hi = _covered(vals, disp[good & ~speck].double().cpu().numpy(), step)
         margin = 2 * step + 0.05 * float(hi - lo)
         lo, hi = float(lo) - margin, float(hi) + margin
         lo, hi = max(lo, float(cands[0])), min(hi, float(cands[-1]))
@@ -122,6 +135,19 @@ def measure_span(stack: torch.Tensor, au, av, centre: int, minimum: tuple[float,
         lo, hi = mid - step, mid + step
     return SpanEstimate(span=(lo, hi), searched=(float(cands[0]), float(cands[-1])),
                         saturated=sat, confident=share, beyond=beyond)
+
+
+def _covered(vals: np.ndarray, solid: np.ndarray, step: float) -> tuple[float, float]:
+    """The 0.2-99.8 percentiles of the confident coarse estimates ``vals``; a side moves to
+    the percentile of the ``solid`` ones (speckles left out) where that lies inward by more
+    than one coarse candidate ``step`` (where speckles alone stretch the span; elsewhere
+    leaving them out only moves the percentile within its own sampling)."""
+    lo, hi = (float(v) for v in np.percentile(vals, [0.2, 99.8]))
+    if solid.size >= 16:
+        slo, shi = (float(v) for v in np.percentile(solid, [0.2, 99.8]))
+        lo = slo if slo - lo > step else lo
+        hi = shi if hi - shi > step else hi
+    return lo, hi
 
 
 def saturation(cost: torch.Tensor, idx: torch.Tensor, steps: int = 3,

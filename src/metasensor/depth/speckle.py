@@ -19,7 +19,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-__all__ = ["Speckles", "remove_speckles"]
+__all__ = ["Speckles", "remove_speckles", "speckle_mask"]
 
 _SCALE = 1000.0  # disparity -> int16 for OpenCV (±32 view px per view step at 1e-3 steps)
 
@@ -43,6 +43,30 @@ class Speckles:
             raise ValueError(f"step must be a positive number, got {self.step!r}")
 
 
+def speckle_mask(disparity: torch.Tensor, amax: float,
+                 options: Speckles = Speckles()) -> torch.Tensor | None:
+    """The speckles of a map (module docstring): boolean ``(H, W)`` on the map's device, or
+    None where the map is not finite or beyond the int16 range of OpenCV's segmentation.
+
+    Parameters
+    ----------
+    disparity : ``(H, W)`` map [view px per view step] (not modified).
+    amax : the largest view offset used, which converts ``options.step`` to disparity.
+    options : :class:`Speckles`.
+    """
+    import cv2
+
+    d = disparity.detach().cpu().numpy().astype(np.float64)
+    limit = float(np.iinfo(np.int16).max - 1) / _SCALE
+    if not np.isfinite(d).all() or np.abs(d).max() > limit:
+        return None
+    img = np.round(d * _SCALE).astype(np.int16)
+    mark = np.iinfo(np.int16).min
+    diff = max(1, int(round(options.step / max(amax, 1e-12) * _SCALE)))
+    img, _ = cv2.filterSpeckles(img, mark, options.size, diff)
+    return torch.from_numpy(img == mark).to(disparity.device)
+
+
 def remove_speckles(disparity: torch.Tensor, amax: float,
                     options: Speckles = Speckles()) -> torch.Tensor:
     """The map with its speckles replaced by their neighbours' median (module docstring).
@@ -58,17 +82,9 @@ def remove_speckles(disparity: torch.Tensor, amax: float,
     -------
     torch.Tensor ``(H, W)``, the same dtype and device.
     """
-    import cv2
-
-    d = disparity.detach().cpu().numpy().astype(np.float64)
-    limit = float(np.iinfo(np.int16).max - 1) / _SCALE
-    if not np.isfinite(d).all() or np.abs(d).max() > limit:
+    speck = speckle_mask(disparity, amax, options)
+    if speck is None:
         return disparity.clone()  # beyond int16 at this resolution: left as it is
-    img = np.round(d * _SCALE).astype(np.int16)
-    mark = np.iinfo(np.int16).min
-    diff = max(1, int(round(options.step / max(amax, 1e-12) * _SCALE)))
-    img, _ = cv2.filterSpeckles(img, mark, options.size, diff)
-    speck = torch.from_numpy(img == mark).to(disparity.device)
     out = disparity.clone()
     valid = ~speck
     for _ in range(options.size + 1):
