@@ -81,3 +81,37 @@ def test_scenes_are_validated():
         benchmark_scene("cube")
     with pytest.raises(ValueError, match="nnum"):
         benchmark_scene("planes", nnum=4)
+
+
+def _plane_with_objects(blobs, size: int, side: int = 384):
+    """5 x 5 views of a textured plane at +2 view px per view step carrying square objects of
+    ``size`` px at +12 (integer shifts)."""
+    from scipy import ndimage
+
+    rng = np.random.default_rng(0)
+    tex = (ndimage.gaussian_filter(rng.standard_normal((side + 64, side + 64)), 1.0) + 3.0)
+    a = np.arange(5) - 2
+    views = []
+    for u in a:
+        for v in a:
+            img = np.roll(tex, (2 * u, 2 * v), axis=(0, 1))[:side, :side].copy()
+            for y, x in blobs:
+                ty, tx = 300 + y % 50, 300 + x % 50
+                img[y + 12 * u:y + 12 * u + size, x + 12 * v:x + 12 * v + size] = (
+                    1.5 * tex[ty:ty + size, tx:tx + size])
+            views.append(img)
+    au, av = np.repeat(a, 5).astype(float), np.tile(a, 5).astype(float)
+    return torch.from_numpy(np.stack(views).astype(np.float32)), au, av
+
+
+def test_isolated_coarse_pixels_do_not_stretch_the_span():
+    # 64 objects of 2 x 2 coarse pixels (coarse factor 4), 0.7 % of the view: speckles of the
+    # coarse map; with them counted the span ran to the search's ends (±16)
+    small = [(y, x) for y in range(40, 340, 40) for x in range(40, 340, 40)]
+    views, au, av = _plane_with_objects(small, 8)
+    lo, hi = measure_span(views, au, av, 12).span
+    assert lo < 2.0 < hi and hi < 8.0 and lo > -4.0, (lo, hi)
+    # one object of 16 x 16 coarse pixels is a region: the span covers it
+    views, au, av = _plane_with_objects([(150, 150)], 64)
+    lo, hi = measure_span(views, au, av, 12).span
+    assert lo < 2.0 and hi > 12.0, (lo, hi)

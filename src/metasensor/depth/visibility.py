@@ -62,7 +62,7 @@ class Visibility:
     radius: int = 4
     window: int = 1
     rounds: int = 3
-    min_views: float = 0.25
+    min_views: float = 0.1
     tolerance: float = 0.5
     confident: float = 0.1
     margin: float = 0.25
