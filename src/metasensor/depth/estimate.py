@@ -231,28 +231,41 @@ def estimate_depth(views, cfg: SystemConfig, calibration=None, *, candidates: in
         gf = GuidedFilter(guide, radius=radius, eps=eps)
         span, limit, found = initial_span(stack, au, av, centre, cfg, occlusion, disparity_range)
         weight = CENTRE_WEIGHT / cfg.scan**2 if cost == "variance" else 0.0
-        while True:
-            cands = sweep_candidates(span, candidates, amax)
-            # the sweep's (mean-subtracted, padded) copy serves for the views from here
-            disp, idx, conf, sat, stack = _sweep(stack, au, av, centre, cands, gf, cost,
-                                                 occlusion, smoothing, progress, weight)
-            wider = None if limit is None else widened(span, limit, *sat)
-            if wider is None or wider == span:
-                break
-            span = wider
+        # the sweep's (mean-subtracted, padded) copy serves for the views from here
+        disp, idx, conf, sat, stack, cands = _swept_until_covered(
+            stack, au, av, centre, span, limit, candidates, amax, gf, cost, occlusion,
+            smoothing, progress, weight)
         if limit is None:  # a given span: the coarse search says whether it holds the scene
-            sat = check_given_span(span, sat, found.beyond)
+            sat = check_given_span(span, sat, found.beyond)  # swept once, not widened
         if refine_iterations > 0:
             gfr = gf if refine_radius is None else GuidedFilter(guide, refine_radius, eps)
             disp = _refined(stack, au, av, disp, gfr, cands, refine_iterations, occlusion)
         if fill:
             disp = fill_low_confidence(disp, conf, guide, radius=fill_radius,
                                        threshold=fill_threshold, eps=eps)
-        if visibility is not None and cfg.scan == 1:
-            disp = reveal_background(stack, au, av, centre, disp, conf, visibility)
-        disp = _edges_decided(stack, au, av, disp, conf, amax, cfg, edges, refiner, speckles)
+        disp = _layers_decided(stack, au, av, centre, disp, conf, amax, cfg, visibility, edges,
+                               refiner, speckles)
     return depth_result(disp, conf, idx, fill_threshold, cands, cfg, lens,
                         "given" if limit is None else "measured", sat, mask)
+
+
+def _swept_until_covered(stack, au, av, centre, span, limit, candidates, amax, gf, cost,
+                         occlusion, smoothing, progress, weight):
+    """The plane sweep over ``span``, widened (up to ``limit``; None: a given span, swept
+    once) and swept again while the estimate saturates an end (:func:`widened`).
+
+    Returns
+    -------
+    disp, idx, conf, sat, stack, cands : :func:`_sweep`'s results and the last candidates.
+    """
+    while True:
+        cands = sweep_candidates(span, candidates, amax)
+        disp, idx, conf, sat, stack = _sweep(stack, au, av, centre, cands, gf, cost,
+                                             occlusion, smoothing, progress, weight)
+        wider = None if limit is None else widened(span, limit, *sat)
+        if wider is None or wider == span:
+            return disp, idx, conf, sat, stack, cands
+        span = wider
 
 
 def _used_views(arr, mask, cfg: SystemConfig, shift_maps, normalize: bool, dev):
@@ -293,11 +306,13 @@ def _used_views(arr, mask, cfg: SystemConfig, shift_maps, normalize: bool, dev):
     return stack, au, av, centre, amax
 
 
-def _edges_decided(stack, au, av, disp, conf, amax: float, cfg: SystemConfig, edges, refiner,
-                   speckles) -> torch.Tensor:
-    """The disparities after the optional edge steps, in order: the coverage re-decision of
-    depth-edge pixels (:func:`metasensor.depth.edges.snap_edges`), then, for plain light-field
-    views (``cfg.scan == 1``) only, the learned choice of their layer
+def _layers_decided(stack, au, av, centre: int, disp, conf, amax: float, cfg: SystemConfig,
+                    visibility, edges, refiner, speckles) -> torch.Tensor:
+    """The disparities after the optional layer steps, in order: for plain light-field views
+    (``cfg.scan == 1``) the re-decision of pixels given a nearer layer with the views that see
+    the farther one (:func:`metasensor.depth.visibility.reveal_background`); the coverage
+    re-decision of depth-edge pixels (:func:`metasensor.depth.edges.snap_edges`); then, for
+    plain light-field views only, the learned choice of their layer
     (:func:`metasensor.depth.learned.refine_edges`) and the removal of speckles
     (:func:`metasensor.depth.speckle.remove_speckles`).
 
@@ -307,13 +322,15 @@ def _edges_decided(stack, au, av, disp, conf, amax: float, cfg: SystemConfig, ed
         The views ``(V, H, W)`` as the sweep left them.
     au, av : numpy.ndarray
         Their offsets from the centre view [view steps].
+    centre : int
+        The centre view's index in ``stack``.
     disp, conf : torch.Tensor
         Disparities [view px per view step] and confidences ``(H, W)``.
     amax : float
         The largest view offset [view steps].
     cfg : SystemConfig
         The system (``scan``).
-    edges, refiner, speckles : EdgeSnap, EdgeRefiner, Speckles or None
+    visibility, edges, refiner, speckles : Visibility, EdgeSnap, EdgeRefiner, Speckles or None
         Each step's settings, or None: skipped.
 
     Returns
@@ -321,6 +338,8 @@ def _edges_decided(stack, au, av, disp, conf, amax: float, cfg: SystemConfig, ed
     torch.Tensor
         The disparities ``(H, W)``.
     """
+    if visibility is not None and cfg.scan == 1:
+        disp = reveal_background(stack, au, av, centre, disp, conf, visibility)
     if edges is not None:
         disp = snap_edges(stack, au, av, disp, edges)
     if refiner is not None and cfg.scan == 1:

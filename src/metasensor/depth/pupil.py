@@ -55,8 +55,8 @@ def default_view_mask(arr: np.ndarray, cfg: SystemConfig) -> np.ndarray:
         return configured
     mask = configured | lit
     warnings.warn(f"{int((lit & beyond).sum())} views beyond the configured pupil (radius "
-                  f"{cfg.pupil_radius_px:.3g} views, from cfg.na) are lit: using {int(mask.sum())} "
-                  f"of the {cfg.nnum} x {cfg.nnum} views, not the configuration's "
-                  f"{int(configured.sum())}; pass view_mask to choose", UserWarning,
-                  stacklevel=3)
+                  f"{cfg.pupil_radius_px:.3g} views, from cfg.na) are lit, so the data's pupil "
+                  f"is wider: using every lit view, {int(mask.sum())} of the {cfg.nnum} x "
+                  f"{cfg.nnum}, not the configuration's {int(configured.sum())}; pass view_mask "
+                  "to choose", UserWarning, stacklevel=3)
     return mask
