@@ -23,7 +23,7 @@ def _flat_views(cfg, level_of):
 def test_a_full_grid_of_lit_views_is_used_and_warned(nnum, configured):
     cfg = ms.SystemConfig(nnum=nnum, scan=1)
     assert cfg.view_mask().sum() == configured
-    with pytest.warns(UserWarning, match=rf"using {nnum * nnum} of the .* not the "
+    with pytest.warns(UserWarning, match=rf"using every lit view, {nnum * nnum} of the .* not the "
                                          rf"configuration's {configured}"):
         mask = default_view_mask(_flat_views(cfg, lambda r: np.ones_like(r)), cfg)
     assert mask.all()
