@@ -9,6 +9,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from metasensor.dao.wavefront import DAO_MODES
+from metasensor.optics.zernike import noll_indices
 from metasensor.solvers.krishnan_fergus import DEFAULT_LAMBDA
 
 __all__ = ["DaoOptions", "DaoResult", "resolve_options"]
@@ -106,11 +107,11 @@ class DaoOptions:
                 isinstance(size, int | np.integer) and size > 0 and size % 2)):
             raise ValueError(f"psf_size must be 'auto', None or a positive odd int, got {size!r}")
         if self.modes is not None:
-            modes = tuple(int(j) for j in self.modes)
-            if not modes or min(modes) < 1 or max(modes) > max(DAO_MODES):
-                raise ValueError(f"modes must be Noll indices in 1..{max(DAO_MODES)} (or None: "
-                                 f"chosen from the views), got {self.modes!r}")
-            object.__setattr__(self, "modes", modes)
+            try:
+                modes = noll_indices(self.modes, max(DAO_MODES))
+            except (TypeError, ValueError) as exc:
+                raise ValueError(f"{exc} (or None: chosen from the views)") from None
+            object.__setattr__(self, "modes", tuple(int(j) for j in modes))
 
 
 @dataclass

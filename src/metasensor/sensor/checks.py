@@ -134,7 +134,6 @@ def lattice_period(frames, nnum: int, max_frames: int = 9) -> tuple[float, float
     return 2.0 / (np.hypot(*g1) + np.hypot(*g2)), float(min(p1, p2))
 
 
-
 def period_mismatch(frames, nnum: int) -> float | None:
     """The frames' measured lenslet period [px] (:func:`lattice_period`, at most 9 frames) where
     it contradicts ``nnum``, else None (it agrees, or no lattice is measured).
@@ -147,6 +146,7 @@ def period_mismatch(frames, nnum: int) -> float | None:
         return None
     tolerance = max(PERIOD_TOLERANCE, nnum / (2 * min(np.shape(frames[0])[-2:])))
     return got[0] if abs(got[0] - nnum) > tolerance * nnum else None
+
 
 def _fundamental(prominence: np.ndarray, g: np.ndarray, strength: float, lowest: float,
                  side: int) -> tuple[np.ndarray, float]:

@@ -93,20 +93,19 @@ def phase_checked(frames, nnum: int, scan: int, order, start_phase: int = 0):
             rel = np.subtract(got, ref) + step * np.array(order[start_phase % t], float)
             if f < t:
                 period.append(rel)
-            elif _nearest(rel[None], nnum, step) is not None:
+            elif _consistent(rel[None], nnum, step):
                 check_scan_offsets([rel], order, np.eye(2), nnum, scan, start_phase, first=f)
-        if f == t - 1 and len(period) == t and _nearest(np.array(period), nnum, step) \
-                is not None:
+        if f == t - 1 and len(period) == t and _consistent(np.array(period), nnum, step):
             check_scan_offsets(period, order, np.eye(2), nnum, scan, start_phase, relative=True)
         yield frame
 
 
-def _nearest(rel: np.ndarray, nnum: int, step: int) -> list | None:
-    """The phases nearest the offsets ``rel`` (``(F, 2)`` px), or None unless every offset lies
-    within :data:`PHASE_TOLERANCE` of a step of its phase and the phases are distinct."""
+def _consistent(rel: np.ndarray, nnum: int, step: int) -> bool:
+    """Whether every offset ``rel`` (``(F, 2)`` px) lies within :data:`PHASE_TOLERANCE` of a
+    step of its nearest phase, and those phases are distinct."""
     k = np.round(rel / step)
     res = rel - step * k
     if np.abs(res).max() > PHASE_TOLERANCE * step:
-        return None
-    phases = [tuple(int(v) for v in row) for row in k % (nnum // step)]
-    return phases if len(set(phases)) == len(phases) else None
+        return False
+    phases = {tuple(int(v) for v in row) for row in k % (nnum // step)}
+    return len(phases) == len(rel)
