@@ -9,8 +9,8 @@ simulate a capture (5×5 scan, SNR 30 dB) and compare with the truth
 - ISA with the true aberration (the oracle).
 Rows: PSNR, SSIM and (DAO) the residual wavefront r.m.s. and σ = residual / peak-to-valley.
 Writes ``benchmarks/results/ed_fig4.png`` and the rows (run_all.py writes the JSON).
-Targets (issue 6): wave ≥ geometric + 3 dB at 3 λ; wave within 1.5 dB of the oracle at 1 λ;
-wave above the 2D sensor at every level.
+Targets (the DAO requirement): wave ≥ geometric + 3 dB at 3 λ; wave within 1.5 dB of the
+oracle at 1 λ; wave above the 2D sensor at every level.
 
 PSF windows (the cost driver). ``view_psfs``' default window keeps 99.5 % of the light of all
 225 views and is sized by the ray reach at the pupil rim (K = 341-413 at 1 λ, ~900 at 3 λ, whose
@@ -205,7 +205,7 @@ def summary(rows: list[dict]) -> list[dict]:
         gap = mean[1.0, "oracle_isa"] - mean[1.0, "wave_dao"]
         out.append({"summary": "target wave within 1.5 dB of oracle at 1 λ", "value": gap,
                     "holds": bool(gap <= 1.5)})
-    for v, limit in ((1.0, 0.1), (3.0, 0.3)):  # issue 6: residual wavefront r.m.s.
+    for v, limit in ((1.0, 0.1), (3.0, 0.3)):  # the DAO requirement: residual wavefront r.m.s.
         res = [r["residual_rms"] for r in rows if r["rms"] == v and r["mode"] == "wave_dao"]
         if res:
             ok = sum(x <= limit for x in res)

@@ -10,9 +10,9 @@ also holds the residual wavefront r.m.s. (modes 4–45). Same cases and PSF wind
 finer and wider than the reconstructions'); Richardson–Lucy ISA (5 iterations), as the figure.
 Writes ``benchmarks/results/ed_fig5.png`` and the rows (run_all.py writes the JSON).
 
-Targets: DAO's residual stays below 0.2 λ at 1 λ down to 10 dB (issue 6); its image stays within
-1 dB PSNR of the oracle's at every level and SNR (the figure's "consistent" estimation: what the
-residual left costs the image); DAO above the 2D sensor at every aberrated level and SNR.
+Targets (the DAO requirement): DAO's residual stays below 0.2 λ at 1 λ down to 10 dB; its image
+stays within 1 dB PSNR of the oracle's at every level and SNR (the figure's "consistent" estimation:
+what the residual left costs the image); DAO above the 2D sensor at every aberrated level and SNR.
 Full mode: the camera scene, one draw per level, levels 0 / 1 / 2 λ (150-px blocks, 240 px at
 2 λ, whose rays reach past a 150-px block), SNR 3 / 10 / 20 / 30 / 40 dB, at most 3 DAO updates.
 """

@@ -1,4 +1,4 @@
-"""ISA quality with the contract call, across scenes and scene sizes (issue 5's SSIM >= 0.90 line).
+"""ISA quality with the contract call, across scenes and scene sizes (the SSIM >= 0.90 requirement).
 
 For each scene (the built-in chart and grey natural images) and size, the simulator captures the
 field aberration-free, 5 x 5 scan, SNR 30 dB (seed 0; seeds 1-2 moved SSIM by <= 0.002), and

@@ -1,4 +1,4 @@
-"""ISA quality against the SNR: how much light issue 5's SSIM >= 0.90 line needs on natural images.
+"""ISA quality against the SNR: how much light the SSIM >= 0.90 requirement needs on natural images.
 
 ``bench_isa_quality`` holds the SNR at 30 dB and varies the scene and its size; this sweeps the
 SNR for two natural images: the camera at 192 px (the slow test's field, 180 truth px) and coffee

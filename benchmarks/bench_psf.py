@@ -1,4 +1,4 @@
-"""Benchmark of the wave-optics PSF bank (issue 2): the prototype's 15 x 15 views, one depth.
+"""Benchmark of the wave-optics PSF bank: the prototype's 15 x 15 views, one depth.
 
 Each case runs in a fresh process (so its peak resident memory is its own): wall and CPU
 seconds of ``view_psfs`` (cache off), peak RSS, the window K and grid, and the time of the FFTs
@@ -7,7 +7,7 @@ bank's own ``_propagate``, torch's FFT as the direct bank's; timed in the
 same process right after) with its share of the wall time. Cases: aberration-free; 1 λ r.m.s.
 random Noll modes 4-45 (seed 0) with the default 99.5 %-energy window and with K = 75; and the
 subsample = 3 bank used by the simulator. ``quick``: the aberration-free bank and the 1 λ bank
-at K = 75 only. Target (issue 2): < 10 s on 2 CPU cores; < 0.5 s on a GPU.
+at K = 75 only. Target: < 10 s on 2 CPU cores; < 0.5 s on a GPU.
 """
 
 from __future__ import annotations

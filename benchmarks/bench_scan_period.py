@@ -141,7 +141,7 @@ def run(quick: bool = False) -> list[dict]:
 
 
 def _targets(rows: list[dict]) -> list[dict]:
-    """Issue 5's targets per focus, budget, scene and solver series. The ``default`` series is
+    """The scan-period targets per focus, budget, scene and solver series. The ``default`` series is
     what ``reconstruct`` runs without a solver: HQS, and Richardson–Lucy for the 1x1 scan."""
     out = []
     for df, budget, scene in dict.fromkeys(

@@ -1,4 +1,5 @@
-"""A sensor-sized capture streamed from Zarr through multisite blocks into Zarr (issue 5).
+"""The whole sensor's cost: a sensor-sized capture streamed from Zarr through multisite blocks
+into Zarr.
 
 The claim measured: ``metasensor reconstruct views.zarr --blocks 8x8 --zarr`` reconstructs the
 prototype's whole field without holding its field of views in memory at once. The views of the
@@ -11,11 +12,11 @@ scan), and the noise-free views of its middle tile (105 samples a side, consiste
 periodic scene because the PSFs reach far less than a tile) are tiled over the field, plus fresh
 Gaussian noise with the signal-dependent variance a·signal + b fitted to that capture's 30 dB
 photon and read noise (seeded per view), so the store compresses like a real one.
-A child process runs the command and reports its own peak resident memory and CPU time, once
-per mode: the command's default (no options: the sparse-gradient solver, HQS, after
-``--dao auto``'s per-block aberration probe), then ``--quality fast`` (the preview:
-Richardson-Lucy, 5 iterations, issue 5's benchmark setting, no aberration estimate). Rows: views
-bytes (logical and on disk), peak RSS and its ratio to the views, wall and CPU time, seconds per
+A child process runs the command and reports its own peak resident memory and CPU time, once per
+mode: the command's default (no options: the sparse-gradient solver, HQS, after ``--dao auto``'s
+per-block aberration probe), then ``--quality fast`` (the preview: Richardson-Lucy, 5
+iterations, the streaming benchmark's setting, no aberration estimate). Rows: views bytes
+(logical and on disk), peak RSS and its ratio to the views, wall and CPU time, seconds per
 megapixel, the 1-minute load average before and after, and the SSIM of a 4 x 4-tile crop in the
 middle against the tiled truth, next to the middle tile of the 3 x 3-tile capture reconstructed
 in one piece (with the same settings). A full run writes ``results/stream.json`` after each row
@@ -42,7 +43,7 @@ FULL = {"sensor": (6004, 7920), "blocks": "8x8"}
 QUICK = {"sensor": (1204, 1204), "blocks": "2x2"}
 TILE_PX = 315  # 21 lenslets
 ITERATIONS = 5
-# the command's default, then the preview (issue 5's benchmark setting)
+# the command's default, then the preview (the streaming benchmark's setting)
 MODES = {"default": [], "fast": ["--quality", "fast"]}
 
 _CHILD = """

@@ -86,7 +86,7 @@ def test_cli_writes_outputs(tmp_path):
                                    ",".join(map(str, data["mtf"][0]["roi"])), "--out",
                                    str(tmp_path / "e2")])
     assert res.exit_code == 0, res.output
-    # issue 9 spells the command without --out: the folder defaults to <stem>_evaluation beside it
+    # the documented command has no --out: the folder defaults to <stem>_evaluation beside it
     res = CliRunner().invoke(app, ["evaluate", str(tmp_path / "r.tif"), "--truth",
                                    str(tmp_path / "t.tif")])
     assert res.exit_code == 0, res.output

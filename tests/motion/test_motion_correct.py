@@ -1,4 +1,4 @@
-"""Motion correction on simulated dynamic scenes (acceptance of issue 7).
+"""Motion correction on simulated dynamic scenes (the motion stage's acceptance figures).
 
 Truth: the scene at the reference time on the dense grid (motion.synthetic). Measures:
 PSNR to the truth (images in [0, 1]); the scan artefact ``scan_artifact`` (excess spectral

@@ -85,18 +85,20 @@ def test_isa_beats_the_views_and_conserves_flux(setup, scene):
 
 
 _CAMERA_SHORT = pytest.mark.xfail(
-    strict=True, reason="issue 5 asks SSIM >= 0.90; measured 0.779 on the natural image at 30 dB "
-    "with the sparse-gradient prior (0.671 with Richardson-Lucy). The best linear reconstruction "
-    "on data that follow the model exactly reaches 0.66 at 30 dB and 0.90 only near 60 dB "
-    "(benchmarks/bench_isa_limit.py: 70 % of AᵀA's eigenvalues < 1e-4); the sparse-gradient "
-    "prior reaches 0.890 at 60 dB and 0.894 without noise (benchmarks/bench_isa_snr.py)")
+    strict=True,
+    reason="the reconstruction requirement asks SSIM >= 0.90; measured 0.779 on the natural image "
+    "at 30 dB with the sparse-gradient prior (0.671 with Richardson-Lucy). The best linear "
+    "reconstruction on data that follow the model exactly reaches 0.66 at 30 dB and 0.90 only "
+    "near 60 dB (benchmarks/bench_isa_limit.py: 70 % of AᵀA's eigenvalues < 1e-4); the "
+    "sparse-gradient prior reaches 0.890 at 60 dB and 0.894 without noise "
+    "(benchmarks/bench_isa_snr.py)")
 
 
 @pytest.mark.parametrize("scene", ["chart", pytest.param("camera", marks=_CAMERA_SHORT)])
 def test_isa_ssim_090_acceptance(setup, scene):
-    # The default solver, the sparse-gradient prior (solvers.hqs), called exactly as issue 5's
-    # contract does; Richardson-Lucy gives 0.52 / 0.67 (test above). Measured: chart 0.907,
-    # camera 0.779.
+    # The default solver, the sparse-gradient prior (solvers.hqs), called exactly as the
+    # reconstruction contract does; Richardson-Lucy gives 0.52 / 0.67 (test above). Measured:
+    # chart 0.907, camera 0.779.
     import metasensor as ms
 
     cfg, bank, caps = setup

@@ -46,7 +46,8 @@ def test_demo_end_to_end(tmp_path):
 
 @pytest.mark.slow
 def test_demo_default_edge_mtf50_gain(tmp_path):
-    # Issue 9: MTF50 of the meta-imaging reconstruction vs the 2D sensor at the field edge >= 3x
+    # The demo's requirement: MTF50 of the meta-imaging reconstruction vs the 2D sensor at the
+    # field edge >= 3x
     # (the demo on the ISO chart, in focus, 384 px, HQS; measured 0.251 vs 0.037 c/px = 6.8x,
     # centre 0.186 vs 0.038).
     run_demo(tmp_path, DemoSettings(scene="chart", focus_offset=0.0, field_blocks=(3, 3)),
