@@ -12,6 +12,7 @@ block_psfs`). The views of the bank's visiting order become the operator's data
 from __future__ import annotations
 
 import sys
+from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -56,7 +57,10 @@ class BlockTask:
         show two depth layers is solved with one bank per layer; None: one bank.
     setup_gate : threading.Semaphore or None
         Local runs of several blocks at once: held from the block's start to its solver's
-        first step, so that no two blocks build their spectra at once (their peaks add up).
+        first step, so that no two blocks build their spectra at once (their peaks add up);
+        lifted while DAO estimates the block's wavefront (each of its updates builds and solves
+        as a solver does, which two blocks already do at once), so that one block's DAO does
+        not idle the others.
     """
 
     block: Block
@@ -208,8 +212,9 @@ def _bank(task: BlockTask, window: np.ndarray
     dao = replace(task.dao, progress=True) if shown else task.dao
     res = _probe(task, window, dao, init)
     if res is None:  # not negligible (or no probe): the full estimate
-        res = estimate.run_dao(window, task.cfg, dao, init=init, device=task.device,
-                               view_mask=_view_mask(task))
+        with _gate_lifted(task.setup_gate):
+            res = estimate.run_dao(window, task.cfg, dao, init=init, device=task.device,
+                                   view_mask=_view_mask(task))
     z_est = np.asarray(res.zernike, dtype=np.float32).ravel()
     merged = np.zeros(max(zernike.size, z_est.size), np.float32)
     merged[:z_est.size] = z_est
@@ -248,6 +253,19 @@ def _operator(task: BlockTask, psf: np.ndarray, data_win: np.ndarray):
     geometry = make_geometry(data_win.shape[-2:], task.cfg.scan_step_px, psf.shape[-1] // 2,
                              pad=task.pad)
     return PhaseSpaceOperator(psf, geometry, device=task.device), [], None
+
+
+@contextmanager
+def _gate_lifted(gate):
+    """Release the held ``gate`` (None: nothing) for the body, and take it back after."""
+    if gate is None:
+        yield
+        return
+    gate.release()
+    try:
+        yield
+    finally:
+        gate.acquire()
 
 
 class _Release:

@@ -1,0 +1,70 @@
+"""The set-up gate of local multi-block runs: held through a block's set-up, lifted while DAO
+estimates the block's wavefront (so one block's DAO does not idle the other workers)."""
+
+import threading
+from types import SimpleNamespace
+
+import numpy as np
+
+import metasensor as ms
+from metasensor.dao import estimate
+from metasensor.dao.estimate import DaoOptions
+from metasensor.recon import block
+
+
+def _free(gate) -> bool:
+    """Whether another block could take the gate now (taken and given back at once)."""
+    if gate.acquire(blocking=False):
+        gate.release()
+        return True
+    return False
+
+
+def _task(gate, psf_fn):
+    cfg = ms.SystemConfig()
+    c = cfg.center
+    return SimpleNamespace(zernike=np.zeros(15, np.float32), dao=DaoOptions(), psf=None,
+                           psf_fn=psf_fn, cfg=cfg, device="cpu", dao_negligible=0.0,
+                           progress=None, block=SimpleNamespace(index=(0, 0)),
+                           setup_gate=gate, uv=[(c, c), (c, c + 1)], probe_samples=0)
+
+
+def test_the_gate_is_lifted_during_dao_and_held_again_for_the_bank(monkeypatch):
+    gate = threading.Semaphore(1)
+    gate.acquire()  # as reconstruct_block holds it from the block's start
+    seen = {}
+
+    def fake_dao(window, cfg, options, **kw):
+        seen["during_dao"] = _free(gate)
+        return SimpleNamespace(zernike=np.r_[0, 0, 0, 0.3], history=[0.3], fits=[0.05])
+
+    def fake_bank(cfg, zernike, device):
+        seen["during_bank"] = _free(gate)
+        return np.zeros((cfg.nnum, cfg.nnum, 3, 3), np.float32)
+
+    monkeypatch.setattr(estimate, "run_dao", fake_dao)
+    window = np.ones((15, 15, 8, 8), np.float32)
+    bank, merged, history, est, fit = block._bank(_task(gate, fake_bank), window)
+    assert seen == {"during_dao": True, "during_bank": False}
+    assert not _free(gate)  # held again: released at the solver's first step
+    assert history == [0.3] and fit == 0.05 and merged[3] == np.float32(0.3)
+
+
+def test_the_gate_is_taken_back_when_dao_fails(monkeypatch):
+    gate = threading.Semaphore(1)
+    gate.acquire()
+
+    def failing_dao(*args, **kw):
+        raise RuntimeError("no wavefront")
+
+    monkeypatch.setattr(estimate, "run_dao", failing_dao)
+    try:
+        block._bank(_task(gate, None), np.ones((15, 15, 8, 8), np.float32))
+    except RuntimeError:
+        pass
+    assert not _free(gate)  # reconstruct_block's own release then frees it once
+
+
+def test_no_gate_no_lift():
+    with block._gate_lifted(None):
+        pass
