@@ -1,5 +1,6 @@
 """The set-up gate of local multi-block runs: held through a block's set-up, lifted while DAO
-estimates the block's wavefront (so one block's DAO does not idle the other workers)."""
+estimates the wavefront of a small block (so one block's DAO does not idle the other workers),
+kept through a large block's DAO (whose memory grows with its window)."""
 
 import threading
 from types import SimpleNamespace
@@ -49,6 +50,23 @@ def test_the_gate_is_lifted_during_dao_and_held_again_for_the_bank(monkeypatch):
     assert seen == {"during_dao": True, "during_bank": False}
     assert not _free(gate)  # held again: released at the solver's first step
     assert history == [0.3] and fit == 0.05 and merged[3] == np.float32(0.3)
+
+
+def test_a_large_block_keeps_the_gate_through_dao(monkeypatch):
+    gate = threading.Semaphore(1)
+    gate.acquire()
+    seen = {}
+
+    def fake_dao(window, cfg, options, **kw):
+        seen["during_dao"] = _free(gate)
+        return SimpleNamespace(zernike=np.r_[0, 0, 0, 0.3], history=[0.3], fits=[0.05])
+
+    monkeypatch.setattr(estimate, "run_dao", fake_dao)
+    side = int(np.sqrt(block.DAO_UNGATED_SAMPLES)) + 1
+    window = np.ones((15, 15, side, side), np.float32)
+    block._bank(_task(gate, lambda cfg, z, dev: np.zeros((15, 15, 3, 3), np.float32)), window)
+    assert seen == {"during_dao": False}
+    assert not _free(gate)
 
 
 def test_the_gate_is_taken_back_when_dao_fails(monkeypatch):

@@ -26,6 +26,10 @@ from metasensor.recon.probe import probe_window
 
 __all__ = ["BlockTask", "BlockResult", "reconstruct_block", "default_psfs", "probe_window"]
 
+# view samples (per view) of the largest block window whose DAO runs outside the set-up gate;
+# why this size: docs/decisions.md
+DAO_UNGATED_SAMPLES = 96 * 96
+
 
 @dataclass
 class BlockTask:
@@ -58,9 +62,9 @@ class BlockTask:
     setup_gate : threading.Semaphore or None
         Local runs of several blocks at once: held from the block's start to its solver's
         first step, so that no two blocks build their spectra at once (their peaks add up);
-        lifted while DAO estimates the block's wavefront (each of its updates builds and solves
-        as a solver does, which two blocks already do at once), so that one block's DAO does
-        not idle the others.
+        lifted while DAO estimates the wavefront of a block whose window has at most
+        ``DAO_UNGATED_SAMPLES`` view samples, so that one block's DAO does not idle the others
+        (a larger block's DAO holds it: its memory grows with the window).
     """
 
     block: Block
@@ -212,7 +216,8 @@ def _bank(task: BlockTask, window: np.ndarray
     dao = replace(task.dao, progress=True) if shown else task.dao
     res = _probe(task, window, dao, init)
     if res is None:  # not negligible (or no probe): the full estimate
-        with _gate_lifted(task.setup_gate):
+        small = window.shape[-2] * window.shape[-1] <= DAO_UNGATED_SAMPLES
+        with _gate_lifted(task.setup_gate if small else None):
             res = estimate.run_dao(window, task.cfg, dao, init=init, device=task.device,
                                    view_mask=_view_mask(task))
     z_est = np.asarray(res.zernike, dtype=np.float32).ravel()
