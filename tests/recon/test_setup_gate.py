@@ -31,20 +31,24 @@ def _task(gate, psf_fn):
                            setup_gate=gate, uv=[(c, c), (c, c + 1)], probe_samples=0)
 
 
+def _recording_dao(gate, seen):
+    """A stand-in for ``run_dao`` that notes whether the gate is free while it runs."""
+    def fake_dao(window, cfg, options, **kw):
+        seen["during_dao"] = _free(gate)
+        return SimpleNamespace(zernike=np.r_[0, 0, 0, 0.3], history=[0.3], fits=[0.05])
+    return fake_dao
+
+
 def test_the_gate_is_lifted_during_dao_and_held_again_for_the_bank(monkeypatch):
     gate = threading.Semaphore(1)
     gate.acquire()  # as reconstruct_block holds it from the block's start
     seen = {}
 
-    def fake_dao(window, cfg, options, **kw):
-        seen["during_dao"] = _free(gate)
-        return SimpleNamespace(zernike=np.r_[0, 0, 0, 0.3], history=[0.3], fits=[0.05])
-
     def fake_bank(cfg, zernike, device):
         seen["during_bank"] = _free(gate)
         return np.zeros((cfg.nnum, cfg.nnum, 3, 3), np.float32)
 
-    monkeypatch.setattr(estimate, "run_dao", fake_dao)
+    monkeypatch.setattr(estimate, "run_dao", _recording_dao(gate, seen))
     window = np.ones((15, 15, 8, 8), np.float32)
     bank, merged, history, est, fit = block._bank(_task(gate, fake_bank), window)
     assert seen == {"during_dao": True, "during_bank": False}
@@ -56,12 +60,7 @@ def test_a_large_block_keeps_the_gate_through_dao(monkeypatch):
     gate = threading.Semaphore(1)
     gate.acquire()
     seen = {}
-
-    def fake_dao(window, cfg, options, **kw):
-        seen["during_dao"] = _free(gate)
-        return SimpleNamespace(zernike=np.r_[0, 0, 0, 0.3], history=[0.3], fits=[0.05])
-
-    monkeypatch.setattr(estimate, "run_dao", fake_dao)
+    monkeypatch.setattr(estimate, "run_dao", _recording_dao(gate, seen))
     side = int(np.sqrt(block.DAO_UNGATED_SAMPLES)) + 1
     window = np.ones((15, 15, side, side), np.float32)
     block._bank(_task(gate, lambda cfg, z, dev: np.zeros((15, 15, 3, 3), np.float32)), window)
