@@ -39,18 +39,40 @@ def test_small_isolated_segments_take_their_neighbours_value():
 
 def test_estimate_depth_removes_speckles_on_plain_light_field_views_only():
     sv = benchmark_scene("occluders", nnum=5, size=48, max_disparity=3.0, snr_db=30.0, seed=3)
+    # the refiner's own removal of weak speckles off, so that this scene keeps some for the last
+    refiner = ms.depth.EdgeRefiner(clean=None)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        on = ms.estimate_depth(sv.views, sv.config, view_mask=np.ones((5, 5), bool))
+        on = ms.estimate_depth(sv.views, sv.config, view_mask=np.ones((5, 5), bool),
+                               refiner=refiner)
         off = ms.estimate_depth(sv.views, sv.config, view_mask=np.ones((5, 5), bool),
-                                speckles=None)
+                                refiner=refiner, speckles=None)
     again = remove_speckles(torch.from_numpy(off.disparity), 2.0).numpy()
     np.testing.assert_array_equal(on.disparity, again)
     assert (on.disparity != off.disparity).any()   # this scene has speckles
 
 
+def test_only_weak_speckle_pixels_are_replaced_when_a_confidence_is_set():
+    d = _map()
+    conf = torch.ones_like(d)
+    conf[10, 5] = 0.1                     # the lone outlier is weak
+    conf[30, 30] = 0.19                   # one of the two-pixel outlier's pixels is weak
+    out = remove_speckles(d, 4.0, Speckles(confidence=0.2), conf)
+    changed = out != d
+    assert int(changed.sum()) == 2 and bool(changed[10, 5]) and bool(changed[30, 30])
+    assert float(out[10, 5]) == 1.0 and float(out[30, 30]) == -1.0
+    # at confidence 1 every speckle pixel is weak: the same as without the setting
+    assert torch.equal(remove_speckles(d, 4.0, Speckles(confidence=1.0), conf * 0.5),
+                       remove_speckles(d, 4.0))
+    with pytest.raises(ValueError, match="confidence"):
+        remove_speckles(d, 4.0, Speckles(confidence=0.2))
+    with pytest.raises(ValueError, match="shape"):
+        remove_speckles(d, 4.0, Speckles(confidence=0.2), conf[:-1])
+
+
 @pytest.mark.parametrize("kwargs", [dict(size=0), dict(size=2.5), dict(step=0),
-                                    dict(step=float("inf"))])
+                                    dict(step=float("inf")), dict(confidence=0),
+                                    dict(confidence=1.5)])
 def test_speckle_settings_are_checked(kwargs):
     with pytest.raises(ValueError, match=next(iter(kwargs))):
         Speckles(**kwargs)

@@ -47,7 +47,9 @@ def test_default_estimate_is_better_with_it_on_a_photograph_scene():
     sv = natural_scene(nnum=9, size=64, max_disparity=3.0, snr_db=40.0, seed=1)
     m = np.zeros(sv.disparity.shape, bool)
     m[8:-8, 8:-8] = True
-    kw = dict(view_mask=np.ones((9, 9), bool))
+    # the refiner's removal of weak speckles, which also mends some of these pixels, off: the
+    # step's own share
+    kw = dict(view_mask=np.ones((9, 9), bool), refiner=ms.depth.EdgeRefiner(clean=None))
     on = ms.estimate_depth(sv.views, sv.config, **kw).disparity
     off = ms.estimate_depth(sv.views, sv.config, visibility=None, **kw).disparity
     mse_on = np.mean((on - sv.disparity)[m] ** 2)

@@ -11,7 +11,11 @@ is moved to the other layer (the mean of its neighbours on that layer) only wher
 probability reaches ``EdgeRefiner.probability``, in ``EdgeRefiner.passes`` rounds (each on the
 map the previous one left); it chooses between values the map already holds and never invents
 a depth. On long straight edges the pixels of one run take the mean of their run's logits
-(:func:`metasensor.depth.edgeruns.pool_along_runs`, ``EdgeRefiner.run_length``).
+(:func:`metasensor.depth.edgeruns.pool_along_runs`, ``EdgeRefiner.run_length``). Before the
+first round the map's weak speckles are removed (``EdgeRefiner.clean``,
+:func:`metasensor.depth.speckle.remove_speckles` restricted to pixels of low confidence): a lone
+wrong pixel next to an edge sets its neighbours' candidate layers (the 3 x 3 lowest and highest
+disparity) or, as a third value, keeps them out of the two-layer set.
 
 The weights ship as package data (``metasensor/depth/data/edge_refiner.npz``, float32 NumPy
 arrays, no pickle): two fits of the network on the same samples with other seeds
@@ -34,6 +38,7 @@ from torch import nn
 from metasensor.depth.edgefeatures import CHANNELS, PATCH, edge_samples
 from metasensor.depth.edgeruns import pool_along_runs
 from metasensor.depth.edges import two_layer_pixels
+from metasensor.depth.speckle import Speckles, remove_speckles
 
 __all__ = ["WEIGHTS", "EdgeEnsemble", "EdgeNet", "EdgeRefiner", "load_refiner", "refine_edges",
            "save_refiner"]
@@ -55,6 +60,9 @@ class EdgeRefiner:
     run_length : ``L`` of :func:`metasensor.depth.edgeruns.pool_along_runs`: samples on a
         straight run of the edge at least ``2 L + 1`` px long take the mean logit of the run
         within ``±2 L`` px; 0: every pixel decided on its own patch.
+    clean : :class:`metasensor.depth.speckle.Speckles` of the speckles removed from the map
+        before the first round (module docstring; by default only pixels of confidence below
+        0.2), or None: the map as given.
     """
 
     probability: float = 0.5
@@ -62,6 +70,7 @@ class EdgeRefiner:
     passes: int = 2
     weights: str | None = None
     run_length: int = 24
+    clean: Speckles | None = Speckles(confidence=0.2)
 
     def __post_init__(self) -> None:
         p = self.probability
@@ -75,6 +84,8 @@ class EdgeRefiner:
             raise ValueError(f"run_length must be an integer in [0, 64], got {self.run_length!r}")
         if self.weights is not None and not isinstance(self.weights, str | Path):
             raise TypeError(f"weights must be a path or None, got {type(self.weights).__name__}")
+        if self.clean is not None and not isinstance(self.clean, Speckles):
+            raise TypeError(f"clean must be Speckles or None, got {type(self.clean).__name__}")
 
 
 class EdgeNet(nn.Module):
@@ -182,10 +193,14 @@ def refine_edges(views: torch.Tensor, au, av, disparity: torch.Tensor,
     Returns
     -------
     torch.Tensor ``(H, W)``: the disparity, edge pixels possibly moved to the mean of their
-    neighbours on the other layer; other pixels unchanged.
+    neighbours on the other layer, weak speckles (``options.clean``) replaced by their
+    neighbours' median; other pixels unchanged.
     """
-    out = disparity.clone()
     amax = float(max(np.abs(np.asarray(au)).max(), np.abs(np.asarray(av)).max()))
+    if options.clean is not None:
+        out = remove_speckles(disparity, amax, options.clean, confidence)
+    else:
+        out = disparity.clone()
     if model is None:
         net = load_refiner(options.weights, views.device)
     elif next(model.parameters()).device != views.device:

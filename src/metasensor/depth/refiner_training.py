@@ -15,7 +15,9 @@ family ``natural_scene`` uses); plus the benchmark's own kinds at other seeds
 and sizes (``TRAINING_KINDS``; the benchmark's evaluation scenes are seed 1 at 192 px and are
 never used). Each scene is run through :func:`metasensor.estimate_depth` with the settings of
 :data:`TRAINED_ON` (otherwise its defaults) but the refiner itself, and every two-layer
-edge pixel of the result whose coverage the views measure gives a sample: its evidence
+edge pixel of the result (as the estimator leaves it: before the refiner's own removal of weak
+speckles, ``EdgeRefiner.clean``, which came after the shipped weights) whose coverage the views
+measure gives a sample: its evidence
 (:func:`metasensor.depth.edgefeatures.edge_samples`), whether the front's value is nearer the
 truth than the background's, and as its weight what the wrong choice adds to the squared
 error, ``|(front − t)² − (back − t)²|`` (the loss is then the expected squared error of the

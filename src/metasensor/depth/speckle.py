@@ -8,7 +8,10 @@ segments. Here: the map is split into segments of 4-connected pixels whose dispa
 by at most ``step`` between neighbours (OpenCV's ``filterSpeckles``), segments of at most
 ``size`` pixels are speckles, and each speckle pixel takes the median of its non-speckle 3 x 3
 neighbours (repeated inwards for pixels with none). So a speckle takes a value the map holds
-next to it; a thin structure (a segment longer than ``size`` pixels) is kept.
+next to it; a thin structure (a segment longer than ``size`` pixels) is kept. With
+``Speckles.confidence`` set, only the speckle pixels that the estimator is unsure of (confidence
+below it) are replaced; a confident lone pixel (e.g. of a thin bar the sweep found in pieces)
+stays.
 """
 
 from __future__ import annotations
@@ -31,16 +34,22 @@ class Speckles:
     size : largest segment removed [px].
     step : neighbours differing by at most this much belong to one segment [outermost-view
         px: the disparity step times the largest view offset].
+    confidence : replace only speckle pixels whose confidence (in [0, 1]) is below this; None:
+        every speckle pixel.
     """
 
     size: int = 4
     step: float = 0.75
+    confidence: float | None = None
 
     def __post_init__(self) -> None:
         if not (isinstance(self.size, int) and 1 <= self.size <= 64):
             raise ValueError(f"size must be an integer in [1, 64], got {self.size!r}")
         if not (isinstance(self.step, int | float) and 0 < self.step < float("inf")):
             raise ValueError(f"step must be a positive number, got {self.step!r}")
+        c = self.confidence
+        if c is not None and not (isinstance(c, int | float) and 0 < c <= 1):
+            raise ValueError(f"confidence must be a number in (0, 1] or None, got {c!r}")
 
 
 def speckle_mask(disparity: torch.Tensor, amax: float,
@@ -68,7 +77,8 @@ def speckle_mask(disparity: torch.Tensor, amax: float,
 
 
 def remove_speckles(disparity: torch.Tensor, amax: float,
-                    options: Speckles = Speckles()) -> torch.Tensor:
+                    options: Speckles = Speckles(),
+                    confidence: torch.Tensor | None = None) -> torch.Tensor:
     """The map with its speckles replaced by their neighbours' median (module docstring).
 
     Parameters
@@ -77,14 +87,23 @@ def remove_speckles(disparity: torch.Tensor, amax: float,
     amax : the largest view offset used (``max |u − c|, |v − c|``), which converts
         ``options.step`` to disparity.
     options : :class:`Speckles`.
+    confidence : ``(H, W)`` confidence of the estimator in [0, 1]; needed where
+        ``options.confidence`` is set (only speckle pixels below it are replaced).
 
     Returns
     -------
     torch.Tensor ``(H, W)``, the same dtype and device.
     """
+    if options.confidence is not None and confidence is None:
+        raise ValueError("Speckles.confidence is set: the estimator's confidence map is needed")
     speck = speckle_mask(disparity, amax, options)
     if speck is None:
         return disparity.clone()  # beyond int16 at this resolution: left as it is
+    if options.confidence is not None:
+        if tuple(confidence.shape) != tuple(disparity.shape):
+            raise ValueError(f"confidence must have the map's shape {tuple(disparity.shape)}, "
+                             f"got {tuple(confidence.shape)}")
+        speck &= confidence.to(speck.device) < options.confidence
     out = disparity.clone()
     valid = ~speck
     for _ in range(options.size + 1):
