@@ -50,6 +50,14 @@ def test_estimate_depth_removes_speckles_on_plain_light_field_views_only():
     again = remove_speckles(torch.from_numpy(off.disparity), 2.0).numpy()
     np.testing.assert_array_equal(on.disparity, again)
     assert (on.disparity != off.disparity).any()   # this scene has speckles
+    # a removal restricted to weak pixels reads the estimator's confidence
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        weak = ms.estimate_depth(sv.views, sv.config, view_mask=np.ones((5, 5), bool),
+                                 refiner=refiner, speckles=Speckles(confidence=0.3))
+    again = remove_speckles(torch.from_numpy(off.disparity), 2.0, Speckles(confidence=0.3),
+                            torch.from_numpy(off.confidence)).numpy()
+    np.testing.assert_array_equal(weak.disparity, again)
 
 
 def test_only_weak_speckle_pixels_are_replaced_when_a_confidence_is_set():

@@ -345,7 +345,7 @@ def _layers_decided(stack, au, av, centre: int, disp, conf, amax: float, cfg: Sy
     if refiner is not None and cfg.scan == 1:
         disp = refine_edges(stack, au, av, disp, conf, refiner)
     if speckles is not None and cfg.scan == 1:
-        disp = remove_speckles(disp, amax, speckles)
+        disp = remove_speckles(disp, amax, speckles, conf)
     return disp
 
 
