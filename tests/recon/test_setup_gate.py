@@ -79,10 +79,3 @@ def test_the_gate_is_taken_back_when_dao_fails(monkeypatch):
     with pytest.raises(RuntimeError, match="no wavefront"):
         block._bank(_task(gate, None), np.ones((15, 15, 8, 8), np.float32))
     assert not _free(gate)  # reconstruct_block's own release then frees it once
-
-
-def test_without_a_gate_the_body_just_runs():
-    ran = []
-    with block._gate_lifted(None):
-        ran.append(True)
-    assert ran == [True]

@@ -54,8 +54,9 @@ class Speckles:
 
 def speckle_mask(disparity: torch.Tensor, amax: float,
                  options: Speckles = Speckles()) -> torch.Tensor | None:
-    """The speckles of a map (module docstring): boolean ``(H, W)`` on the map's device, or
-    None where the map is not finite or beyond the int16 range of OpenCV's segmentation.
+    """The speckles of a map (module docstring; every small segment: ``options.confidence`` is
+    applied by :func:`remove_speckles`): boolean ``(H, W)`` on the map's device, or None where
+    the map is not finite or beyond the int16 range of OpenCV's segmentation.
 
     Parameters
     ----------
