@@ -28,7 +28,8 @@ def _task(gate, psf_fn):
     return SimpleNamespace(zernike=np.zeros(15, np.float32), dao=DaoOptions(), psf=None,
                            psf_fn=psf_fn, cfg=cfg, device="cpu", dao_negligible=0.0,
                            progress=None, block=SimpleNamespace(index=(0, 0)),
-                           setup_gate=gate, uv=[(c, c), (c, c + 1)], probe_samples=0)
+                           setup_gate=gate, uv=[(c, c), (c, c + 1)], probe_samples=0,
+                           dao_samples=block.DAO_SAMPLES)
 
 
 def _recording_dao(gate, seen):

@@ -269,7 +269,8 @@ def _tasks(views, cfg: SystemConfig, method: str, grid, zern, opts: ReconOptions
             uv=plan["uv"], zernike=zern[b.index], solver=plan["solver"], dao=dao, psf=opts.psf,
             psf_fn=opts.psf_fn, register=bool(opts.register), pad=opts.pad,
             dao_negligible=float(opts.dao_negligible or 0.0),
-            probe_samples=int(opts.dao_probe_samples), setup_gate=gate, layers=layers,
+            probe_samples=int(opts.dao_probe_samples), dao_samples=int(opts.dao_samples),
+            setup_gate=gate, layers=layers,
             device=plan["device"], windowed=ship, progress=plan["tick"] if local else None,
             corner_zernike=None if plan["corners"] is None else plan["corners"][b.index]))
     return out

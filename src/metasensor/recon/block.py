@@ -21,7 +21,7 @@ import numpy as np
 from metasensor.config import SystemConfig
 from metasensor.dao.estimate import DaoOptions
 from metasensor.recon.blocks import Block
-from metasensor.recon.dao_choice import PROBE_SAMPLES
+from metasensor.recon.dao_choice import DAO_SAMPLES, PROBE_SAMPLES
 from metasensor.recon.probe import probe_window
 
 __all__ = ["BlockTask", "BlockResult", "reconstruct_block", "default_psfs", "probe_window"]
@@ -56,15 +56,18 @@ class BlockTask:
     probe_samples : int
         With ``dao_negligible``: view samples per side of the sub-window the probe decides on
         (:func:`probe_window`); windows no larger are probed whole.
+    dao_samples : int
+        View samples per side of the sub-window DAO estimates the block's wavefront on (the
+        most detailed, :func:`probe_window`); windows no larger are read whole.
     layers : DepthLayers or None
         The depth-aware model's settings (:mod:`metasensor.recon.layers`): a block whose views
         show two depth layers is solved with one bank per layer; None: one bank.
     setup_gate : threading.Semaphore or None
         Local runs of several blocks at once: held from the block's start to its solver's
         first step, so that no two blocks build their spectra at once (their peaks add up);
-        lifted while DAO estimates the wavefront of a block whose window has at most
+        lifted while DAO estimates the wavefront on a sub-window of at most
         ``DAO_UNGATED_SAMPLES`` view samples, so that one block's DAO does not idle the others
-        (a larger block's DAO holds it: its memory grows with the window).
+        (a larger DAO window holds it: DAO's memory grows with its window).
     """
 
     block: Block
@@ -84,6 +87,7 @@ class BlockTask:
     corner_zernike: np.ndarray | None = None  # (points², J): space-variant field points
     dao_negligible: float = 0.0
     probe_samples: int = PROBE_SAMPLES
+    dao_samples: int = DAO_SAMPLES
     setup_gate: Any = None
     layers: Any = None  # DepthLayers: the depth-aware model (recon.layers); None: one bank
 
@@ -175,8 +179,9 @@ def _view_mask(task: BlockTask) -> np.ndarray:
 def _probe(task: BlockTask, window: np.ndarray, dao, init):
     """With ``dao_negligible``: one DAO update on the ISA image of the block's
     :func:`probe_window` (cheap: no per-view deconvolution, a sub-window), returned when its
-    estimate is negligible, else None (the full estimate runs on the whole window, from the
-    start again: far from the truth the ISA image absorbs part of the error)."""
+    estimate is negligible, else None (the full estimate runs on the ``dao_samples``
+    sub-window, from the start again: far from the truth the ISA image absorbs part of the
+    error)."""
     if task.dao_negligible <= 0:
         return None
     import math
@@ -215,10 +220,11 @@ def _bank(task: BlockTask, window: np.ndarray
     shown = task.progress is not None  # a local run with a bar: show DAO's updates too
     dao = replace(task.dao, progress=True) if shown else task.dao
     res = _probe(task, window, dao, init)
-    if res is None:  # not negligible (or no probe): the full estimate
-        small = window.shape[-2] * window.shape[-1] <= DAO_UNGATED_SAMPLES
+    if res is None:  # not negligible (or no probe): the full estimate, on a sub-window
+        sub = probe_window(window, task.dao_samples)
+        small = sub.shape[-2] * sub.shape[-1] <= DAO_UNGATED_SAMPLES
         with _gate_lifted(task.setup_gate if small else None):
-            res = estimate.run_dao(window, task.cfg, dao, init=init, device=task.device,
+            res = estimate.run_dao(sub, task.cfg, dao, init=init, device=task.device,
                                    view_mask=_view_mask(task))
     z_est = np.asarray(res.zernike, dtype=np.float32).ravel()
     merged = np.zeros(max(zernike.size, z_est.size), np.float32)

@@ -8,8 +8,9 @@ and a block whose estimate is negligible (under :data:`NEGLIGIBLE_RMS` waves r.m
 keeps the aberration-free bank, so an aberration-free capture gets the plain ISA image. Whether
 the estimate is negligible is decided by a probe: one DAO update on the ISA image of at most
 :data:`PROBE_SAMPLES` x :data:`PROBE_SAMPLES` view samples of the block (the most detailed of its
-centre and edges); only a probe above the threshold runs the full estimate on the whole block.
-Where the
+centre and edges); only a probe above the threshold runs the full estimate, on the block's most
+detailed sub-window of at most :data:`DAO_SAMPLES` x :data:`DAO_SAMPLES` view samples (a block
+has one wavefront, and DAO's time and memory grow with the samples it reads). Where the
 aberration is given, ``"auto"`` uses it as is (``"wave"`` with it starts DAO from it). Why the
 threshold is what it is: docs/decisions.md ("the DAO default").
 """
@@ -18,8 +19,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-__all__ = ["DAO_CHOICES", "NEGLIGIBLE_RMS", "PROBE_SAMPLES", "DaoChoice", "choose_dao",
-           "block_dao_options"]
+__all__ = ["DAO_CHOICES", "NEGLIGIBLE_RMS", "PROBE_SAMPLES", "DAO_SAMPLES", "DaoChoice",
+           "choose_dao", "block_dao_options"]
 
 #: what ``method`` / ``--dao`` accept ("none" is "isa": no aberration estimate)
 DAO_CHOICES = ("auto", "none", "isa", "wave", "geometric")
@@ -29,6 +30,10 @@ NEGLIGIBLE_RMS = 0.02
 #: :func:`metasensor.recon.probe.probe_window`); why: docs/decisions.md ("the cost of the
 #: default reconstruction")
 PROBE_SAMPLES = 160
+#: view samples per side of the sub-window on which a block's DAO estimates its wavefront
+#: (larger windows: :func:`metasensor.recon.probe.probe_window`); why: docs/decisions.md ("DAO
+#: on a large block")
+DAO_SAMPLES = 160
 
 
 @dataclass(frozen=True)

@@ -10,7 +10,7 @@ import numpy as np
 
 from metasensor.dao.estimate import DaoOptions
 from metasensor.phasespace.views import ORDERS
-from metasensor.recon.dao_choice import PROBE_SAMPLES
+from metasensor.recon.dao_choice import DAO_SAMPLES, PROBE_SAMPLES
 from metasensor.recon.layers import resolve_depth_layers
 from metasensor.solvers.hqs import HQSOptions
 from metasensor.solvers.noise_model import PoissonGaussian
@@ -97,6 +97,13 @@ class ReconOptions:
         View samples per side (at least 8) of the sub-window on which a block's probe decides
         whether its estimate is negligible (default
         :data:`metasensor.recon.dao_choice.PROBE_SAMPLES`; smaller windows are probed whole).
+    dao_samples : int
+        View samples per side (at least 8) of the sub-window on which a block's DAO estimates
+        its wavefront: the most detailed of the block's centre and edges
+        (:func:`metasensor.recon.probe.probe_window`; default
+        :data:`metasensor.recon.dao_choice.DAO_SAMPLES`; smaller windows are read whole). The
+        estimate applies to the whole block; DAO's time and memory grow with this window, not
+        with the block.
     device : str or None
         "cpu" or "cuda" (default: CUDA when present).
     psf : numpy.ndarray or None
@@ -129,6 +136,7 @@ class ReconOptions:
     dao: DaoOptions | None = None
     dao_negligible: float | None = None
     dao_probe_samples: int = PROBE_SAMPLES
+    dao_samples: int = DAO_SAMPLES
     device: Any = None
     psf: Any = None
     psf_fn: Any = None
@@ -142,9 +150,10 @@ class ReconOptions:
                           ("margin", 0)):
             _int_or_none(name, getattr(self, name), low)
         _int_or_none("overlap", self.overlap, 0)
-        s = self.dao_probe_samples
-        if isinstance(s, bool) or not isinstance(s, int | np.integer) or s < 8:
-            raise ValueError(f"dao_probe_samples must be an integer >= 8, got {s!r}")
+        for name in ("dao_probe_samples", "dao_samples"):
+            s = getattr(self, name)
+            if isinstance(s, bool) or not isinstance(s, int | np.integer) or s < 8:
+                raise ValueError(f"{name} must be an integer >= 8, got {s!r}")
         r = self.view_radius
         if r is not None and (isinstance(r, bool) or not (
                 isinstance(r, int | float | np.number) and math.isfinite(r) and r >= 0)):
