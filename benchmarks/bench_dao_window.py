@@ -41,10 +41,15 @@ def _capture(size: int, path: Path) -> None:
     np.save(path, cap.views)
 
 
+def _peak_gb() -> float:
+    """This process's own peak resident memory (GB; an ``exec`` resets it)."""
+    from metasensor.io.memory import peak_resident_bytes
+
+    return peak_resident_bytes() / 1e9
+
+
 def _case(path: str, samples: int) -> dict:
     """One DAO run on the capture at ``path``, in this process (``samples`` 0: the whole)."""
-    import resource
-
     import numpy as np
     import torch
 
@@ -57,11 +62,11 @@ def _case(path: str, samples: int) -> dict:
 
     views = np.load(path)
     win = probe_window(views, samples) if samples else views
-    base = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6
+    base = _peak_gb()
     t0 = time.perf_counter()
     res = run_dao(win, ms.SystemConfig(), DaoOptions(max_iter=3, tol=0.0))
     sec = time.perf_counter() - t0
-    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6
+    peak = _peak_gb()
     truth = random_zernike(RMS, seed=SEED)
     n = max(len(truth), len(res.zernike))
     err = np.zeros(n)

@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import json
 import os
-import resource
 import subprocess
 import sys
 import time
@@ -29,6 +28,7 @@ def _case(name: str, rms: float, size: int | None, subsample: int, device: str |
 
     from metasensor.backend import resolve_device
     from metasensor.config import SystemConfig
+    from metasensor.io.memory import peak_resident_bytes
     from metasensor.optics import psf as psf_mod
     from metasensor.optics.zernike import random_zernike
 
@@ -59,7 +59,7 @@ def _case(name: str, rms: float, size: int | None, subsample: int, device: str |
     if dev.type == "cuda":
         torch.cuda.synchronize()
     fft = time.perf_counter() - t1
-    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    peak = peak_resident_bytes() / 2**20  # this process's own (an exec resets it)
     if dev.type == "cuda":
         peak = max(peak, torch.cuda.max_memory_allocated() / 2**20)
     return {"case": name, "device": str(dev), "threads": torch.get_num_threads(),

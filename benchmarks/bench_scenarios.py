@@ -54,7 +54,6 @@ from __future__ import annotations
 
 import json
 import os
-import resource
 import subprocess
 import sys
 import tempfile
@@ -159,17 +158,16 @@ def _seams(out, layout, pos, seed: int, half: int = 40) -> tuple[float, float]:
 
 
 def _child_stitch(tile_shape, grid, overlap, chunk) -> dict:
-    """Run :func:`stitch` in a fresh process; add its peak resident memory (GB)."""
+    """Run :func:`stitch` in a fresh process; add its own peak resident memory (GB: VmHWM,
+    which the child's ``exec`` resets; ``RUSAGE_CHILDREN`` would give the largest of every
+    child so far, and each child's ``ru_maxrss`` starts at this process's peak)."""
     call = f"b.stitch({list(tile_shape)!r}, {list(grid)!r}, {int(overlap)}, {int(chunk)})"
     code = (f"import json,sys; sys.path.insert(0, {str(HERE)!r}); import bench_scenarios as b; "
-            f"print(json.dumps({call}))")
-    before = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
+            f"from metasensor.io.memory import peak_resident_bytes as p; row = {call}; "
+            f"row['peak_gb'] = p() / 1024**3; print(json.dumps(row))")
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True, env={**os.environ, "OMP_NUM_THREADS": "1"})
-    peak = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
-    row = json.loads(res.stdout.strip().splitlines()[-1])
-    row["peak_gb"] = max(peak, before) / 1024**2  # ru_maxrss: kilobytes on Linux
-    return row
+    return json.loads(res.stdout.strip().splitlines()[-1])
 
 
 def _cluster_row() -> dict:

@@ -1,12 +1,12 @@
 """Simulator benchmark: a 2,048² chart, 5×5 scan, field-dependent aberration in 4×4 blocks,
 SNR 30 dB (target < 60 s and < 4 GB on 2 CPU cores).
 
-Each case runs in a fresh subprocess (peak RSS = that process's ``ru_maxrss``). The fine PSF
-banks (``view_psfs(subsample=3)``, the optics stage's cost, cached on disk after the first call)
-are timed separately: one real bank is computed (``psf_bank_s``) and handed to the simulator for
-all 16 blocks through ``simulate(psf=...)`` (rendering cost does not depend on the bank's
-content), so ``simulate_s`` is the simulator's own time with its banks in hand; the cold-cache
-CPU total is ``simulate_cpu_s + 16 · psf_bank_cpu_s`` (cache off). ``simulate_cpu_s`` is its
+Each case runs in a fresh subprocess (peak RSS: that process's own, ``peak_resident_bytes``). The
+fine PSF banks (``view_psfs(subsample=3)``, the optics stage's cost, cached on disk after the first
+call) are timed separately: one real bank is computed (``psf_bank_s``) and handed to the simulator
+for all 16 blocks through ``simulate(psf=...)`` (rendering cost does not depend on the bank's
+content), so ``simulate_s`` is the simulator's own time with its banks in hand; the cold-cache CPU
+total is ``simulate_cpu_s + 16 · psf_bank_cpu_s`` (cache off). ``simulate_cpu_s`` is its
 CPU time (all threads; on a shared machine the wall time also counts waiting for the CPU).
 Reference costs in the same process: one
 ``rfft2`` + ``irfft2`` of the scene, one copy of the views array.
@@ -24,7 +24,6 @@ HERE = Path(__file__).resolve().parent
 
 
 def _child(size: int, nnum: int, blocks: int, scan: int) -> dict:
-    import resource
     import time
 
     import numpy as np
@@ -32,6 +31,7 @@ def _child(size: int, nnum: int, blocks: int, scan: int) -> dict:
 
     torch.set_num_threads(int(os.environ.get("BENCH_THREADS", "2")))
     import metasensor as ms
+    from metasensor.io.memory import peak_resident_bytes
     from metasensor.simulation.capture import simulate
     from metasensor.simulation.kernels import fine_view_bank
     from metasensor.simulation.scenes import resolution_chart
@@ -46,7 +46,7 @@ def _child(size: int, nnum: int, blocks: int, scan: int) -> dict:
     grid = np.zeros((blocks, blocks, 15))
     grid[..., 3:] = rng.normal(size=(blocks, blocks, 12))
     grid *= 0.5 / np.sqrt((grid**2).sum(-1, keepdims=True))  # 0.5 waves r.m.s. per block
-    rss0 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    rss0 = peak_resident_bytes() / 1024
     from metasensor.optics.psf import view_psfs
 
     t0, c0 = time.perf_counter(), time.process_time()
@@ -60,7 +60,7 @@ def _child(size: int, nnum: int, blocks: int, scan: int) -> dict:
     t0, c0 = time.perf_counter(), time.process_time()
     cap = simulate(scene, cfg, field_zernike=grid, snr_db=30.0, psf=provider)
     t_sim, c_sim = time.perf_counter() - t0, time.process_time() - c0
-    rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    rss = peak_resident_bytes() / 1024
     x = torch.from_numpy(scene)
     t0 = time.perf_counter()
     torch.fft.irfft2(torch.fft.rfft2(x), s=x.shape)

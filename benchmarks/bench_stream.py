@@ -46,14 +46,17 @@ ITERATIONS = 5
 # the command's default, then the preview (the streaming benchmark's setting)
 MODES = {"default": [], "fast": ["--quality", "fast"]}
 
+# the child's own peak: VmHWM (ru_maxrss would carry this process's peak over into the child)
 _CHILD = """
 import resource, sys
 from metasensor.cli import app
+from metasensor.io.memory import peak_resident_bytes
 try:
     app(args=sys.argv[1:], standalone_mode=False)
 finally:
     use = resource.getrusage(resource.RUSAGE_SELF)
-    print("PEAK_RSS_KB " + str(use.ru_maxrss) + " CPU_S " + str(use.ru_utime + use.ru_stime))
+    print("PEAK_RSS_KB " + str(peak_resident_bytes() // 1024) + " CPU_S "
+          + str(use.ru_utime + use.ru_stime))
 """
 
 

@@ -1,0 +1,30 @@
+"""A process's own peak resident memory: a child started after its parent's large allocation
+reports its own peak, not the parent's (``ru_maxrss`` survives fork + exec on Linux)."""
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from metasensor.io.memory import peak_resident_bytes
+
+
+def test_the_peak_grows_with_an_allocation_and_never_falls():
+    before = peak_resident_bytes()
+    block = np.ones(64 * 2**20 // 8)  # 64 MiB, touched
+    after = peak_resident_bytes()
+    assert after >= before + 60 * 2**20 and block.sum() > 0
+    del block
+    # freed memory leaves the peak (to within the kernel's batched per-thread counters)
+    assert peak_resident_bytes() >= after - 2**20
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="VmHWM is Linux's")
+def test_a_child_reports_its_own_peak_not_its_parents():
+    block = np.ones(256 * 2**20 // 8)  # the parent's peak: at least 256 MiB
+    assert block.sum() > 0 and peak_resident_bytes() > 256 * 2**20
+    code = "from metasensor.io.memory import peak_resident_bytes as p; print(p())"
+    child = int(subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                               check=True).stdout.split()[-1])
+    assert 0 < child < 200 * 2**20  # numpy and the package, not the parent's 256 MiB
