@@ -69,3 +69,22 @@ def test_reconstruct_refuses_a_dao_window_under_eight_samples():
     with pytest.raises(ValueError, match="dao_samples"):
         ms.reconstruct(np.ones((15, 15, 8, 8), np.float32), ms.SystemConfig(), method="wave",
                        dao_samples=4)
+
+
+def test_reconstruct_hands_dao_samples_to_every_block(monkeypatch):
+    seen = []
+
+    def fake_dao(window, cfg, options, **kw):
+        seen.append(window.shape[-2:])
+        return SimpleNamespace(zernike=np.r_[0, 0, 0, 0.4], history=[0.4], fits=[0.1])
+
+    def delta_bank(cfg, zernike, device=None):
+        bank = np.zeros((cfg.nnum, cfg.nnum, 3, 3), np.float32)
+        bank[:, :, 1, 1] = 1.0
+        return bank
+
+    monkeypatch.setattr(estimate, "run_dao", fake_dao)
+    views = np.random.default_rng(2).random((15, 15, 40, 40)).astype(np.float32)
+    ms.reconstruct(views, ms.SystemConfig(), method="wave", blocks=(1, 2), dao_samples=16,
+                   psf_fn=delta_bank, solver="rl", iterations=1)
+    assert len(seen) == 2 and all(s == (16, 16) for s in seen), seen
