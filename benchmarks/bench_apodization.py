@@ -61,6 +61,9 @@ def run(quick: bool = False) -> list[dict]:
 
 
 if __name__ == "__main__":
+    from _usage import exit_on_help
+
+    exit_on_help(__doc__)
     import json
 
     print(json.dumps(run(quick=True), indent=1))

@@ -95,6 +95,9 @@ def run(quick: bool = False) -> list[dict]:
 
 
 if __name__ == "__main__":
+    from _usage import exit_on_help
+
+    exit_on_help(__doc__)
     if sys.argv[1:2] == ["--case"]:
         print(json.dumps(_case(sys.argv[2], int(sys.argv[3]))))
     else:

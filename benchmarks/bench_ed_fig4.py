@@ -268,6 +268,9 @@ def run(quick: bool = False) -> list[dict]:
 
 
 if __name__ == "__main__":
+    from _usage import exit_on_help
+
+    exit_on_help(__doc__)
     import json
 
     quick = "--quick" in sys.argv

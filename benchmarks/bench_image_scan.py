@@ -111,5 +111,8 @@ def run(quick: bool) -> list[dict]:
 
 
 if __name__ == "__main__":
+    from _usage import exit_on_help
+
+    exit_on_help(__doc__)
     for row in run("--quick" in sys.argv):
         print(row)

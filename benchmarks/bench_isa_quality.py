@@ -128,5 +128,8 @@ def finish_ssim_plot(fig, ax, path: Path, xlabel: str, title: str) -> None:
 
 
 if __name__ == "__main__":
+    from _usage import exit_on_help
+
+    exit_on_help(__doc__)
     for row in run(quick="--quick" in sys.argv):
         print(row)

@@ -71,5 +71,8 @@ def _plot(rows: list[dict], path: Path) -> None:
 
 
 if __name__ == "__main__":
+    from _usage import exit_on_help
+
+    exit_on_help(__doc__)
     for row in run(quick="--quick" in sys.argv):
         print(row)

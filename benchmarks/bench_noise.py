@@ -93,6 +93,9 @@ def run(quick: bool = False) -> list[dict]:
 
 
 if __name__ == "__main__":  # pragma: no cover
+    from _usage import exit_on_help
+
+    exit_on_help(__doc__)
     import json
 
     for r in run(quick="--quick" in sys.argv):

@@ -89,6 +89,9 @@ def run(quick: bool = False, device: str | None = None) -> list[dict]:
 
 
 if __name__ == "__main__":
+    from _usage import exit_on_help
+
+    exit_on_help(__doc__)
     if len(sys.argv) == 3 and sys.argv[1] == "--case":
         print(json.dumps(_case(*json.loads(sys.argv[2]))))
     else:

@@ -272,6 +272,9 @@ def _plot(rows: list[dict], path: Path) -> None:
 
 
 if __name__ == "__main__":
+    from _usage import exit_on_help
+
+    exit_on_help(__doc__)
     if "--photos" in sys.argv:  # the natural photographs' studies (benchmarks/quality_photos.py)
         sys.path.insert(0, str(HERE))
         import quality_photos

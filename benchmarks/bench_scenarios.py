@@ -355,6 +355,9 @@ def run(quick: bool = False) -> list[dict]:
 
 
 if __name__ == "__main__":
+    from _usage import exit_on_help
+
+    exit_on_help(__doc__)
     if "--plastic-wrap" in sys.argv or "--telescope-demo" in sys.argv:  # one demo's row alone,
         quick = "--quick" in sys.argv  # merged into the JSON
         rows = _scenario_rows(quick, names=("plastic-wrap" if "--plastic-wrap" in sys.argv

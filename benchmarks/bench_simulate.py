@@ -98,6 +98,9 @@ def run(quick: bool = False) -> list[dict]:
 
 
 if __name__ == "__main__":
+    from _usage import exit_on_help
+
+    exit_on_help(__doc__)
     if len(sys.argv) > 1 and sys.argv[1] == "--child":
         size, nnum, blocks, scan = (int(a) for a in sys.argv[2:6])
         print(json.dumps(_child(size, nnum, blocks, scan)))

@@ -218,6 +218,9 @@ def _reconstruct_row(store, out, mode, case, cfg, cap, truth, shape, image_shape
 
 
 if __name__ == "__main__":  # pragma: no cover
+    from _usage import exit_on_help
+
+    exit_on_help(__doc__)
     if "--blocks-sample" in sys.argv:  # a sample of the blocks, projected (bench_stream_sample)
         from bench_stream_sample import main
 

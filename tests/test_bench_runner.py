@@ -69,3 +69,34 @@ def test_real_benchmark_names_are_accepted(tmp_path, capsys):
     assert module.main(["no_such_bench", "--out", str(tmp_path)]) == 2
     err = capsys.readouterr().err
     assert "psf" in err and "dao" in err
+
+
+def test_every_runnable_benchmark_script_answers_help_before_it_runs():
+    """A script run directly reads its flags from ``sys.argv``; ``--help`` must print its
+    docstring and exit instead of starting a (possibly hour-long) run."""
+    import ast
+
+    bench = RUN_ALL.parent
+    missing = []
+    for path in sorted(bench.glob("bench_*.py")):
+        tree = ast.parse(path.read_text())
+        mains = [n for n in tree.body if isinstance(n, ast.If) and "__main__" in ast.unparse(
+            n.test)]
+        if not mains or "argparse" in path.read_text():
+            continue  # nothing runs when executed, or argparse answers --help itself
+        first = ast.unparse(mains[0].body[1]) if len(mains[0].body) > 1 else ""
+        if "exit_on_help(__doc__)" not in first:
+            missing.append(path.name)
+    assert not missing, missing
+
+
+def test_help_prints_the_docstring_and_exits(tmp_path):
+    import subprocess
+    import sys
+
+    script = RUN_ALL.parent / "bench_metrics.py"
+    out = subprocess.run([sys.executable, str(script), "--help"], capture_output=True,
+                         text=True, timeout=120, cwd=tmp_path)
+    assert out.returncode == 0, out.stderr
+    assert "usage: python benchmarks/bench_metrics.py" in out.stdout
+    assert not list(tmp_path.iterdir())  # nothing ran, nothing written
