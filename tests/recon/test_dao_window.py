@@ -15,17 +15,7 @@ from metasensor.recon.probe import probe_window
 from metasensor.simulation.scenes import load_scene
 
 
-def _task(dao_samples):
-    cfg = ms.SystemConfig()
-    c = cfg.center
-    return SimpleNamespace(zernike=np.zeros(15, np.float32), dao=DaoOptions(), psf=None,
-                           psf_fn=lambda cfg, z, dev: np.zeros((15, 15, 3, 3), np.float32),
-                           cfg=cfg, device="cpu", dao_negligible=0.0, progress=None,
-                           block=SimpleNamespace(index=(0, 0)), setup_gate=None,
-                           uv=[(c, c)], probe_samples=0, dao_samples=dao_samples)
-
-
-def test_dao_reads_the_most_detailed_sub_window_of_a_large_block(monkeypatch):
+def test_dao_reads_the_most_detailed_sub_window_of_a_large_block(monkeypatch, bank_task):
     seen = []
 
     def fake_dao(window, cfg, options, **kw):
@@ -37,7 +27,8 @@ def test_dao_reads_the_most_detailed_sub_window_of_a_large_block(monkeypatch):
     window = np.ones((15, 15, 90, 120), np.float32)
     window[:, :, 60:, :30] += rng.random((30, 30)).astype(np.float32)  # detail: bottom left
     before = window.copy()
-    task = _task(30)
+    task = bank_task(psf_fn=lambda cfg, z, dev: np.zeros((15, 15, 3, 3), np.float32),
+                     dao_samples=30)
     bank, merged, history, est, fit = block._bank(task, window)
     assert len(seen) == 1 and seen[0].shape == (15, 15, 30, 30)
     np.testing.assert_array_equal(seen[0], window[:, :, 60:, :30])

@@ -8,9 +8,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-import metasensor as ms
 from metasensor.dao import estimate
-from metasensor.dao.estimate import DaoOptions
 from metasensor.recon import block
 
 
@@ -22,16 +20,6 @@ def _free(gate) -> bool:
     return False
 
 
-def _task(gate, psf_fn):
-    cfg = ms.SystemConfig()
-    c = cfg.center
-    return SimpleNamespace(zernike=np.zeros(15, np.float32), dao=DaoOptions(), psf=None,
-                           psf_fn=psf_fn, cfg=cfg, device="cpu", dao_negligible=0.0,
-                           progress=None, block=SimpleNamespace(index=(0, 0)),
-                           setup_gate=gate, uv=[(c, c), (c, c + 1)], probe_samples=0,
-                           dao_samples=block.DAO_SAMPLES)
-
-
 def _recording_dao(gate, seen):
     """A stand-in for ``run_dao`` that notes whether the gate is free while it runs."""
     def fake_dao(window, cfg, options, **kw):
@@ -40,7 +28,7 @@ def _recording_dao(gate, seen):
     return fake_dao
 
 
-def test_the_gate_is_lifted_during_dao_and_held_again_for_the_bank(monkeypatch):
+def test_the_gate_is_lifted_during_dao_and_held_again_for_the_bank(monkeypatch, bank_task):
     gate = threading.Semaphore(1)
     gate.acquire()  # as reconstruct_block holds it from the block's start
     seen = {}
@@ -51,25 +39,26 @@ def test_the_gate_is_lifted_during_dao_and_held_again_for_the_bank(monkeypatch):
 
     monkeypatch.setattr(estimate, "run_dao", _recording_dao(gate, seen))
     window = np.ones((15, 15, 8, 8), np.float32)
-    bank, merged, history, est, fit = block._bank(_task(gate, fake_bank), window)
+    bank, merged, history, est, fit = block._bank(bank_task(gate, fake_bank), window)
     assert seen == {"during_dao": True, "during_bank": False}
     assert not _free(gate)  # held again: released at the solver's first step
     assert history == [0.3] and fit == 0.05 and merged[3] == np.float32(0.3)
 
 
-def test_a_large_block_keeps_the_gate_through_dao(monkeypatch):
+def test_a_large_block_keeps_the_gate_through_dao(monkeypatch, bank_task):
     gate = threading.Semaphore(1)
     gate.acquire()
     seen = {}
     monkeypatch.setattr(estimate, "run_dao", _recording_dao(gate, seen))
     side = int(np.sqrt(block.DAO_UNGATED_SAMPLES)) + 1
     window = np.ones((15, 15, side, side), np.float32)
-    block._bank(_task(gate, lambda cfg, z, dev: np.zeros((15, 15, 3, 3), np.float32)), window)
+    block._bank(bank_task(gate, lambda cfg, z, dev: np.zeros((15, 15, 3, 3), np.float32)),
+                window)
     assert seen == {"during_dao": False}
     assert not _free(gate)
 
 
-def test_the_gate_is_taken_back_when_dao_fails(monkeypatch):
+def test_the_gate_is_taken_back_when_dao_fails(monkeypatch, bank_task):
     gate = threading.Semaphore(1)
     gate.acquire()
 
@@ -78,5 +67,5 @@ def test_the_gate_is_taken_back_when_dao_fails(monkeypatch):
 
     monkeypatch.setattr(estimate, "run_dao", failing_dao)
     with pytest.raises(RuntimeError, match="no wavefront"):
-        block._bank(_task(gate, None), np.ones((15, 15, 8, 8), np.float32))
+        block._bank(bank_task(gate), np.ones((15, 15, 8, 8), np.float32))
     assert not _free(gate)  # reconstruct_block's own release then frees it once
