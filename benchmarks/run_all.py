@@ -20,6 +20,7 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent / "src"))
 
 from metasensor.io.atomic import atomic_write_text  # noqa: E402
+from metasensor.io.memory import reset_peak_resident  # noqa: E402
 
 
 def _table(rows: list[dict]) -> str:
@@ -80,6 +81,7 @@ def main(argv: list[str] | None = None) -> int:
         spec.loader.exec_module(module)
         print(f"\n== {name} ==", flush=True)
         t0 = time.perf_counter()
+        reset_peak_resident()  # a benchmark's in-process peak is its own, not its predecessors'
         try:
             rows = module.run(quick=args.quick)
         except Exception as exc:  # report and go on with the others

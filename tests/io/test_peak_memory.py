@@ -40,3 +40,24 @@ def test_a_child_reports_its_own_peak_not_its_parents():
     child = int(subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                                check=True).stdout.split()[-1])
     assert 0 < child < 200 * 2**20  # numpy and the package, not the parent's 256 MiB
+
+
+_RESET = """
+import json
+import numpy as np
+from metasensor.io.memory import peak_resident_bytes as peak, reset_peak_resident
+block = np.ones(128 * 2**20 // 8)  # 128 MiB, touched
+del block
+high = peak()
+done = reset_peak_resident()
+print(json.dumps([high, done, peak()]))
+"""
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="clear_refs is Linux's")
+def test_a_reset_starts_a_new_peak_at_the_current_resident_memory():
+    out = subprocess.run([sys.executable, "-c", _RESET], capture_output=True, text=True,
+                         check=True).stdout
+    high, done, after = json.loads(out.strip().splitlines()[-1])
+    assert done is True
+    assert after <= high - 100 * 2**20, (high, after)  # the freed 128 MiB left the peak

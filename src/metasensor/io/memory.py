@@ -3,7 +3,7 @@ the process's own peak, for the benchmarks' memory figures."""
 
 from __future__ import annotations
 
-__all__ = ["memory_room", "peak_resident_bytes"]
+__all__ = ["memory_room", "peak_resident_bytes", "reset_peak_resident"]
 
 
 def memory_room() -> int:
@@ -30,6 +30,7 @@ def peak_resident_bytes() -> int:
     ``ru_maxrss`` is not used there: it survives ``fork`` + ``exec``, so a child started by
     ``subprocess`` would report its parent's peak wherever that is the larger. Elsewhere:
     ``ru_maxrss`` (kilobytes on most systems, bytes on macOS), with that caveat.
+    :func:`reset_peak_resident` starts a new peak within the process.
     """
     import sys
 
@@ -44,3 +45,25 @@ def peak_resident_bytes() -> int:
 
     peak = int(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)
     return peak if sys.platform == "darwin" else peak * 1024
+
+
+def reset_peak_resident() -> bool:
+    """Set this process's peak resident memory back to its current resident memory, so that
+    :func:`peak_resident_bytes` then reports the peak of the work that follows, not of work done
+    before in the same process (a benchmark runner that runs one benchmark after another).
+
+    Linux 4.0 or later: writes ``5`` to ``/proc/self/clear_refs`` (proc(5)), which resets
+    ``VmHWM``.
+
+    Returns
+    -------
+    bool
+        True where the peak was reset; False where it cannot be (not Linux, or the file is not
+        writable): :func:`peak_resident_bytes` then still includes the earlier work's peak.
+    """
+    try:
+        with open("/proc/self/clear_refs", "w", encoding="ascii") as f:
+            f.write("5")
+    except OSError:
+        return False
+    return True
