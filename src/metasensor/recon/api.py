@@ -228,9 +228,28 @@ def _noise_model(views, opts: ReconOptions, solver: str):
         return None
 
 
-def _solver_options(opts: ReconOptions, solver: str, n_views: int, step: int, noise=None):
+def _capture_noise(hqs_opts, views):
+    """HQS's ``noise_estimate="poisson-gaussian"`` made a model fitted once on the whole
+    capture's ``views`` (a block may hold too few smooth samples for a fit of its own); left as
+    it is where the fit is refused (each solve then tries its own, or warns)."""
+    from dataclasses import replace
+
+    if hqs_opts.noise_estimate != "poisson-gaussian" or hqs_opts.noise is not None or (
+            views is None):
+        return hqs_opts
+    from metasensor.solvers.noise_fit import fit_poisson_gaussian
+
+    try:
+        return replace(hqs_opts, noise_estimate=fit_poisson_gaussian(views).model)
+    except ValueError:
+        return hqs_opts
+
+
+def _solver_options(opts: ReconOptions, solver: str, n_views: int, step: int, noise=None,
+                    views=None):
     """The resolved solver settings (RLOptions or HQSOptions) and RL's subsets; ``noise`` the
-    Poisson–Gaussian model (None: one global weight)."""
+    Poisson–Gaussian model (None: one global weight); ``views`` the capture (for HQS's
+    ``noise_estimate="poisson-gaussian"``, fitted here once)."""
     from dataclasses import replace
 
     from metasensor.solvers.hqs import HQSOptions
@@ -243,7 +262,7 @@ def _solver_options(opts: ReconOptions, solver: str, n_views: int, step: int, no
         hqs_opts = opts.solver_options or HQSOptions()
         if noise is not None and hqs_opts.noise_model is None:
             hqs_opts = replace(hqs_opts, noise_model=noise)
-        return hqs_opts, subsets
+        return _capture_noise(hqs_opts, views), subsets
     iterations = DEFAULT_ITERATIONS if opts.iterations is None else int(opts.iterations)
     shifted = noise if noise is not None and noise.a > 0 else None
     return RLOptions(iterations=iterations, subsets=subsets, noise_model=shifted), subsets
@@ -333,7 +352,7 @@ def reconstruct(views, cfg: SystemConfig, method: str = "isa", zernike=None, fie
     uv = view_order(mask, opts.order)
     dao = block_dao_options(method, cfg, opts.dao, mask, stacklevel=3)
     noise = _noise_model(views, opts, solver)
-    solver_opts, subsets = _solver_options(opts, solver, len(uv), d, noise)
+    solver_opts, subsets = _solver_options(opts, solver, len(uv), d, noise, views)
     corners = None
     if opts.space_variant:
         from metasensor.recon.space_variant import corner_zernikes

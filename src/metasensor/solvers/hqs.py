@@ -17,10 +17,13 @@ the masked normal product of :mod:`metasensor.phasespace.masked_normal`.
 
 Units and λ: the image is normalised to mean 0.5 (``x_n = x / (2·mean)``, the mean from the
 data and the operator's sensitivity) and the prior sees it so. Unless given, λ =
-``lam_scale / σ² · (d / 3)²``, σ the larger of the views' noise (:func:`estimate_noise` unless
-``noise`` is given) and the r.m.s. misfit of a nearly unregularised fit (the model error:
-PSF banks that do not match the data must not get the weight of the noise), and ``(d / 3)²``
-keeps the data's weight per image pixel (V / d² samples) that of the 5 x 5 scan. The start is
+``lam_scale / σ² · (d / 3)^e``, σ the larger of the views' noise (``noise`` where given, else
+measured as ``noise_estimate`` says: :func:`estimate_noise` or the r.m.s. of the views' fitted
+Poisson–Gaussian model, :mod:`metasensor.solvers.noise_fit`) and the r.m.s.
+misfit of a nearly unregularised fit (the model error: PSF banks that do not match the data
+must not get the weight of the noise); ``e`` (``scan_exponent``, default 2) scales the data's
+weight with the scan step ``d`` (px) from that of the 5 x 5 scan (e = 2 keeps the data's weight
+per image pixel, V / d² samples, constant). The start is
 the smoothness-regularised least-squares fit (weight ``init_reg``; the prior is not convex, so
 the start decides where it ends). The result is clipped at zero. Why each default is what it
 is: ``docs/decisions.md``.
@@ -44,6 +47,7 @@ position's own misfit under-states it).
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Callable
 
 import torch
@@ -52,7 +56,8 @@ from metasensor.phasespace.masked_normal import BandNormal
 from metasensor.phasespace.normal import FoldedNormal
 from metasensor.phasespace.operator import PhaseSpaceOperator
 from metasensor.solvers.hqs_options import HQSOptions
-from metasensor.solvers.noise_model import misfit_weights, sample_weights
+from metasensor.solvers.noise_fit import fitted_noise_rms, model_noise_rms
+from metasensor.solvers.noise_model import PoissonGaussian, misfit_weights, sample_weights
 from metasensor.solvers.pcg import preconditioned_cg
 from metasensor.solvers.priors import GRADIENT, Transform
 from metasensor.solvers.result import SolveResult
@@ -96,6 +101,23 @@ def estimate_noise(data: torch.Tensor, mask: torch.Tensor) -> float:
         if vals.numel():
             out.append(float(vals.abs().median()) * 1.4826 / math.sqrt(6.0))
     return float(sum(out) / len(out)) if out else 0.0
+
+
+def _noise(y: torch.Tensor, m: torch.Tensor, options: HQSOptions) -> float:
+    """The views' noise r.m.s. (data units): ``noise`` where given, else measured as
+    ``noise_estimate`` says; a Poisson–Gaussian fit the views do not support falls back to
+    :func:`estimate_noise` with a warning."""
+    if options.noise is not None:
+        return float(options.noise)
+    if isinstance(options.noise_estimate, PoissonGaussian):
+        return model_noise_rms(options.noise_estimate, y, m)
+    if options.noise_estimate == "poisson-gaussian":
+        try:
+            return fitted_noise_rms(y, m)
+        except ValueError as exc:
+            warnings.warn(f"HQS noise: {exc}; using the second-difference estimate instead",
+                          UserWarning, stacklevel=3)
+    return estimate_noise(y, m)
 
 
 class FoldedXStep:
@@ -191,7 +213,7 @@ def _misfit_weights(op, smooth: FoldedXStep, x, aty, y, m, unit: float, options:
         return None, None, None
     mf = m.to(torch.float32)
     yn = y / unit
-    sigma = estimate_noise(y, m) if options.noise is None else float(options.noise)
+    sigma = _noise(y, m, options)
     noise = sigma / unit
     root_n = math.sqrt(max(float(mf.sum()) * yn.shape[0], 1.0))
     bound = options.misfit_weights * noise * root_n
@@ -216,7 +238,7 @@ def _weighted_normal(op, weights: torch.Tensor) -> Callable[[torch.Tensor], torc
 def _data_weight(op: PhaseSpaceOperator, smooth: FoldedXStep, aty, y, m, unit: float,
                  options: HQSOptions, weights=None, sigma=None, start=None, yy=None,
                  fit=None) -> float:
-    """λ (module docstring): lam_scale / σ² · (d / 3)², σ = max(noise, model misfit); with
+    """λ (module docstring): lam_scale / σ² · (d / 3)^e, σ = max(noise, model misfit); with
     ``weights``, the misfit is weighted and σ is the weights' reference σ.
 
     The misfit is that of the fit with smoothness weight ``MISFIT_REG``; a weaker smoothness
@@ -229,7 +251,7 @@ def _data_weight(op: PhaseSpaceOperator, smooth: FoldedXStep, aty, y, m, unit: f
     mf = m.to(torch.float32)
     yn = y / unit
     if sigma is None:
-        sigma = estimate_noise(y, m) if options.noise is None else float(options.noise)
+        sigma = _noise(y, m, options)
     n_obs = max(float(mf.sum()) * yn.shape[0], 1.0)
     misfit = 0.0
     if (fit is not None or weights is not None or start is None or _residual_norm(
@@ -243,7 +265,7 @@ def _data_weight(op: PhaseSpaceOperator, smooth: FoldedXStep, aty, y, m, unit: f
             resid = float(torch.linalg.vector_norm((op.forward(fit) - yn) * weights.sqrt()))
         misfit = resid / math.sqrt(n_obs)
     sigma_n = max(sigma / unit, misfit, 1e-6 * float(yn[:, m].abs().mean()))
-    lam = options.lam_scale / sigma_n**2 * (op.geometry.d / REF_STEP) ** 2
+    lam = options.lam_scale / sigma_n**2 * (op.geometry.d / REF_STEP) ** options.scan_exponent
     if not (lam > 0 and math.isfinite(lam)):
         raise ValueError(f"lam must be positive and finite, got {lam!r}")
     return lam

@@ -11,7 +11,9 @@ from metasensor.solvers.noise_model import PoissonGaussian
 from metasensor.solvers.priors import HyperLaplacian, Prior
 from metasensor.solvers.splitting import Continuation
 
-__all__ = ["HQSOptions"]
+__all__ = ["HQSOptions", "NOISE_ESTIMATES"]
+
+NOISE_ESTIMATES = ("differences", "poisson-gaussian")
 
 
 @dataclass(frozen=True)
@@ -29,7 +31,19 @@ class HQSOptions:
     lam_scale : float
         λ·σ² when λ is derived (default 0.3).
     noise : float or None
-        The views' noise r.m.s. in data units; None: :func:`estimate_noise`.
+        The views' noise r.m.s. in data units; None: measured as ``noise_estimate`` says.
+    noise_estimate : {"differences", "poisson-gaussian"} or PoissonGaussian
+        How the noise is measured where ``noise`` is None: ``"differences"`` (default), the
+        second differences' median absolute deviation
+        (:func:`~metasensor.solvers.hqs.estimate_noise`), which texture and coarse samples
+        raise; ``"poisson-gaussian"``, the r.m.s. of the Poisson–Gaussian model fitted to the
+        solved samples' smooth parts (:func:`~metasensor.solvers.noise_fit.fitted_noise_rms`;
+        where they do not support the fit, the differences, with a warning); a
+        ``PoissonGaussian``: that model's r.m.s. over the solved samples
+        (``sqrt(a·mean(y) + b)``; ``reconstruct`` fits it once on the whole capture, as small
+        blocks hold too few smooth samples for a fit of their own).
+    scan_exponent : float
+        ``e`` of λ's scan factor ``(d / 3)^e`` (module docstring), >= 0 (default 2).
     noise_model : PoissonGaussian or None
         The views' Poisson–Gaussian noise (:mod:`metasensor.solvers.noise_model`): the data
         term becomes weighted least squares, each sample weighed by ``1 / var`` of the smooth
@@ -62,6 +76,8 @@ class HQSOptions:
     lam: float | None = None
     lam_scale: float = 0.3
     noise: float | None = None
+    noise_estimate: str | PoissonGaussian = "differences"
+    scan_exponent: float = 2.0
     noise_model: PoissonGaussian | None = None
     continuation: Continuation = Continuation(beta_max=4096.0)
     inner: int = 3
@@ -92,6 +108,14 @@ class HQSOptions:
             raise ValueError(f"cg_tol must be in [0, 1), got {self.cg_tol!r}")
         if self.noise is not None and not (self.noise >= 0 and math.isfinite(self.noise)):
             raise ValueError(f"noise must be a non-negative number, got {self.noise!r}")
+        if not isinstance(self.noise_estimate, PoissonGaussian) and (
+                self.noise_estimate not in NOISE_ESTIMATES):
+            raise ValueError(f"noise_estimate must be one of {NOISE_ESTIMATES}, got "
+                             f"{self.noise_estimate!r}")
+        e = self.scan_exponent
+        if isinstance(e, bool) or not (isinstance(e, int | float) and math.isfinite(e)
+                                       and e >= 0):
+            raise ValueError(f"scan_exponent must be a finite number >= 0, got {e!r}")
         if self.noise_model is not None and not isinstance(self.noise_model, PoissonGaussian):
             raise TypeError(f"noise_model must be a PoissonGaussian, got "
                             f"{type(self.noise_model).__name__}")

@@ -1,0 +1,124 @@
+"""HQS's noise for its data weight: the second differences against the views' fitted
+Poisson–Gaussian model, and the scan factor (d / 3)^e of λ."""
+
+import warnings
+
+import numpy as np
+import pytest
+import torch
+
+import metasensor as ms
+from metasensor.phasespace.operator import PhaseSpaceOperator, make_geometry
+from metasensor.simulation.scenes import resolution_chart
+from metasensor.solvers.hqs import HQSOptions, estimate_noise
+from metasensor.solvers.noise_fit import fitted_noise_rms, model_noise_rms
+from metasensor.solvers.noise_model import PoissonGaussian
+from recon_standin import one_torch_thread  # noqa: F401
+
+
+@pytest.fixture(scope="module")
+def chart_3x3():
+    """A chart through a 3 x 3 scan (5-px samples), 30 dB per frame: the used views and the
+    r.m.s. of the noise the simulator drew."""
+    cfg = ms.SystemConfig(scan=3)
+    cap = ms.simulate(resolution_chart(10 * 15 + 14), cfg, snr_db=30.0, seed=0,
+                      comparison=False)
+    m = cfg.view_mask()
+    views = cap.views[m].astype(np.float32)
+    drawn = float(np.sqrt(np.mean((views.astype(np.float64) - cap.views_clean[m]) ** 2)))
+    return views, drawn
+
+
+def test_the_fitted_model_reads_the_drawn_noise_where_the_differences_read_the_scene(chart_3x3):
+    # Coarse samples of a chart: its edges fill the second differences (2.7 x the drawn noise
+    # measured), while the fit reads smooth samples only (1.28 x measured at these 30-sample
+    # views; within 10 % on the 80-sample views of a 5 x 5 scan of the same field)
+    views, drawn = chart_3x3
+    full = torch.ones(views.shape[1:], dtype=torch.bool)
+    differences = estimate_noise(torch.from_numpy(views), full) / drawn
+    fitted = fitted_noise_rms(views) / drawn
+    assert differences > 2.0, differences
+    assert 0.9 < fitted < 1.4, fitted
+    assert fitted < 0.6 * differences
+
+
+def test_model_noise_is_the_model_at_the_observed_mean_level():
+    y = np.full((3, 4, 5), 100.0, np.float32)
+    y[:, :, -1] = 1e6  # unobserved: left out
+    mask = np.ones((4, 5), bool)
+    mask[:, -1] = False
+    model = PoissonGaussian(a=2.0, b=25.0)
+    assert model_noise_rms(model, y, mask) == pytest.approx(np.sqrt(2.0 * 100 + 25), rel=1e-6)
+    with pytest.raises(ValueError, match="observed"):
+        model_noise_rms(model, y, np.zeros((4, 5), bool))
+    with pytest.raises(ValueError, match="V, My, Mx"):
+        model_noise_rms(model, y[0])
+
+
+def _weight(options: HQSOptions, d: int, side: int = 24):
+    from metasensor.solvers.hqs import INIT_CG, REG_FLOOR, FoldedXStep, _data_weight, _noise
+    from metasensor.solvers.priors import GRADIENT
+
+    cfg = ms.SystemConfig()
+    bank = np.asarray(ms.view_psfs(cfg), np.float32)[cfg.view_mask()][::4]
+    g = make_geometry((side, side), d, bank.shape[-1] // 2)
+    op = PhaseSpaceOperator(bank, g, device="cpu")
+    truth = torch.from_numpy(resolution_chart(g.domain[0]))
+    clean = op.forward(truth)
+    gen = torch.Generator().manual_seed(0)
+    y = clean + 0.05 * float(clean.mean()) * torch.randn(clean.shape, generator=gen)
+    m = torch.ones(g.grid, dtype=torch.bool)
+    unit = 2 * float(y.sum()) / float(op.sensitivity(m.float()).sum())
+    nm = op.normal()
+    smooth = FoldedXStep(nm, op.masked_normal(m, nm), m, GRADIENT, REG_FLOOR, INIT_CG, True)
+    aty = op.adjoint(y / unit)
+    return _data_weight(op, smooth, aty, y, m, unit, options), _noise(y, m, options)
+
+
+def test_the_scan_exponent_scales_the_data_weight_by_d_over_3():
+    lam2, sigma = _weight(HQSOptions(noise=3.0), d=5)
+    lam_half, _ = _weight(HQSOptions(noise=3.0, scan_exponent=0.5), d=5)
+    assert sigma == 3.0
+    assert lam_half / lam2 == pytest.approx((5 / 3) ** (0.5 - 2), rel=1e-6)
+    lam3, _ = _weight(HQSOptions(noise=3.0), d=3)
+    lam3_half, _ = _weight(HQSOptions(noise=3.0, scan_exponent=0.5), d=3)
+    assert lam3_half == pytest.approx(lam3, rel=1e-9)  # the 5 x 5 scan's step: no factor
+
+
+def test_a_given_model_sets_the_noise_and_a_refused_fit_falls_back_with_a_warning():
+    model = PoissonGaussian(a=0.0, b=4.0)
+    _, sigma = _weight(HQSOptions(noise_estimate=model), d=3)
+    assert sigma == pytest.approx(2.0, rel=1e-6)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        _, fell_back = _weight(HQSOptions(noise_estimate="poisson-gaussian"), d=3, side=6)
+    _, differences = _weight(HQSOptions(), d=3, side=6)
+    assert fell_back == differences  # 29 views of 6 x 6 samples: too few smooth ones
+    assert any("second-difference" in str(w.message) for w in caught)
+
+
+@pytest.mark.parametrize("bad", [{"noise_estimate": "mad"}, {"noise_estimate": None},
+                                 {"scan_exponent": -1.0}, {"scan_exponent": float("nan")},
+                                 {"scan_exponent": True}])
+def test_bad_noise_settings_are_named(bad):
+    with pytest.raises(ValueError, match=next(iter(bad))):
+        HQSOptions(**bad)
+
+
+def test_reconstruct_fits_the_model_once_on_the_whole_capture(monkeypatch):
+    import metasensor.solvers.noise_fit as nf
+    from metasensor.recon.api import _capture_noise
+
+    calls = []
+    real = nf.fit_poisson_gaussian
+    monkeypatch.setattr(nf, "fit_poisson_gaussian", lambda v, *a: calls.append(v.shape)
+                        or real(v, *a))
+    cfg = ms.SystemConfig()
+    cap = ms.simulate(resolution_chart(10 * 15 + 14), cfg, snr_db=30.0, seed=0,
+                      comparison=False)
+    opts = _capture_noise(HQSOptions(noise_estimate="poisson-gaussian"), cap.views)
+    assert isinstance(opts.noise_estimate, PoissonGaussian) and opts.noise_estimate.a > 0
+    assert calls == [cap.views.shape]
+    assert _capture_noise(HQSOptions(), cap.views) == HQSOptions()  # the default: untouched
+    given = HQSOptions(noise_estimate="poisson-gaussian", noise=1.0)
+    assert _capture_noise(given, cap.views) is given
