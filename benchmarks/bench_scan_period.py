@@ -30,9 +30,14 @@ Two ISA solvers (``solver``): ``rl``, Richardson–Lucy (every period), and ``hq
 sparse-gradient prior (``reconstruct``'s default where it applies: periods 3, 5, 15; a 1x1 scan
 would need 225 x 225 systems per frequency).
 
+A third series, ``hqs-pg``, is HQS with the data weight's noise from the capture's
+Poisson–Gaussian fit and the scan factor ``(d / 3)^0.5`` (``CANDIDATE``: a candidate default,
+measured beside the default; ``docs/decisions.md``).
+
 Subsets of the full run (the same sizes and rows, for a re-run on a busy machine):
-``SCAN_PERIOD_BUDGETS=per-frame`` (comma-separated budgets) and ``SCAN_PERIOD_FOCUS=0,0.25``
-(defocus values among ``DEFOCUS``).
+``SCAN_PERIOD_BUDGETS=per-frame`` (comma-separated budgets), ``SCAN_PERIOD_FOCUS=0,0.25``
+(defocus values among ``DEFOCUS``) and ``SCAN_PERIOD_SOLVERS=hqs-pg`` (series among
+``SOLVERS``).
 """
 
 from __future__ import annotations
@@ -48,6 +53,9 @@ sys.path.insert(0, str(HERE.parent / "src"))
 
 PERIODS = (1, 3, 5, 15)
 DEFOCUS = (0.0, 0.25)  # Noll Z4 [waves r.m.s.]: on the MLA's conjugate plane, and off it
+SOLVERS = ("rl", "hqs", "hqs-pg")
+#: settings of the ``hqs-pg`` series
+CANDIDATE = {"noise_estimate": "poisson-gaussian", "scan_exponent": 0.5}
 
 
 def truth_scale(cap, bank) -> float:
@@ -69,6 +77,20 @@ def truth_scale(cap, bank) -> float:
     m = max(bank.shape[-1] // 2 // d + 1, 1)
     inner = (slice(m, s[0] - m), slice(m, s[1] - m))
     return float(cap.views_clean[c, c][inner].sum() / max(pred[inner].sum(), 1e-30))
+
+
+def _solvers() -> tuple:
+    """``SOLVERS`` narrowed by ``SCAN_PERIOD_SOLVERS``."""
+    import os
+
+    env = os.environ.get("SCAN_PERIOD_SOLVERS")
+    if not env:
+        return SOLVERS
+    want = tuple(v.strip() for v in env.split(","))
+    bad = [v for v in want if v not in SOLVERS]
+    if bad:
+        raise ValueError(f"SCAN_PERIOD_SOLVERS: unknown series {bad}; valid: {SOLVERS}")
+    return want
 
 
 def _subset(budgets: tuple, focus: tuple) -> tuple[tuple, tuple]:
@@ -99,6 +121,7 @@ def run(quick: bool = False) -> list[dict]:
     from metasensor.recon.api import reconstruct
     from metasensor.simulation.capture import simulate
     from metasensor.simulation.scenes import natural_image, resolution_chart
+    from metasensor.solvers.hqs import HQSOptions
 
     lenslets = 8 if quick else 16
     size = lenslets * 15 + 14  # holds `lenslets` lenslets at every period (margin (p-1)·d <= 14)
@@ -122,9 +145,11 @@ def run(quick: bool = False) -> list[dict]:
                        snr_db=None if snr is None else float(snr), seed=0, comparison=False)
         k = truth_scale(cap, bank)
         truth = cap.truth * np.float32(k)
-        for solver in ("rl", "hqs") if p > 1 else ("rl",):
+        for solver in [s for s in _solvers() if p > 1 or s == "rl"]:
             t0 = time.perf_counter()
-            rec = reconstruct(cap.views, cfg, psf=bank, solver=solver)
+            rec = reconstruct(cap.views, cfg, psf=bank, solver=solver.removesuffix("-pg"),
+                              solver_options=HQSOptions(**CANDIDATE) if solver == "hqs-pg"
+                              else None)
             sec = time.perf_counter() - t0
             dr = float(truth.max() - truth.min())
             shape = "x".join(map(str, cap.views.shape))
@@ -177,7 +202,8 @@ def _plot(rows: list[dict], path: Path) -> None:
                                                                                solver)]
             ax.plot([r["scan"] for r in sel], [r["ssim"] for r in sel],
                     {"per-frame": "o", "equal-light": "s"}.get(budget, "^")
-                    + ("-" if solver == "rl" else ":"), label=f"{scene}, {budget}, {solver}")
+                    + {"rl": "-", "hqs": ":"}.get(solver, "--"),
+                    label=f"{scene}, {budget}, {solver}")
         ax.set_xscale("log")
         ax.set_xticks(PERIODS, [f"{p}x{p}" for p in PERIODS])
         ax.set_xlabel("scan period")

@@ -107,7 +107,7 @@ def test_bad_noise_settings_are_named(bad):
 
 def test_reconstruct_fits_the_model_once_on_the_whole_capture(monkeypatch):
     import metasensor.solvers.noise_fit as nf
-    from metasensor.recon.api import _capture_noise
+    from metasensor.recon.noise import capture_noise
 
     calls = []
     real = nf.fit_poisson_gaussian
@@ -116,9 +116,9 @@ def test_reconstruct_fits_the_model_once_on_the_whole_capture(monkeypatch):
     cfg = ms.SystemConfig()
     cap = ms.simulate(resolution_chart(10 * 15 + 14), cfg, snr_db=30.0, seed=0,
                       comparison=False)
-    opts = _capture_noise(HQSOptions(noise_estimate="poisson-gaussian"), cap.views)
+    opts = capture_noise(HQSOptions(noise_estimate="poisson-gaussian"), cap.views)
     assert isinstance(opts.noise_estimate, PoissonGaussian) and opts.noise_estimate.a > 0
     assert calls == [cap.views.shape]
-    assert _capture_noise(HQSOptions(), cap.views) == HQSOptions()  # the default: untouched
+    assert capture_noise(HQSOptions(), cap.views) == HQSOptions()  # the default: untouched
     given = HQSOptions(noise_estimate="poisson-gaussian", noise=1.0)
-    assert _capture_noise(given, cap.views) is given
+    assert capture_noise(given, cap.views) is given

@@ -33,6 +33,7 @@ from metasensor.recon.block import BlockTask, reconstruct_block
 from metasensor.recon.blocks import Block, block_zernikes, split_blocks
 from metasensor.recon.collect import Collector
 from metasensor.recon.dao_choice import DAO_CHOICES, block_dao_options, choose_dao
+from metasensor.recon.noise import capture_noise, noise_model
 from metasensor.recon.options import ReconOptions
 
 __all__ = ["reconstruct", "Reconstruction", "ReconOptions"]
@@ -202,49 +203,6 @@ def _block_grid(blocks) -> tuple[int, int]:
         raise ValueError(f"blocks must be a pair (by, bx), got {blocks!r}") from None
 
 
-def _noise_model(views, opts: ReconOptions, solver: str):
-    """The Poisson–Gaussian model ``opts.noise_model`` asks for (fitted here for ``"fit"`` and
-    ``"auto"``: once, on the whole stack), or None for one global weight."""
-    if not isinstance(opts.noise_model, str):
-        return opts.noise_model
-    if opts.noise_model == "global" or (opts.noise_model == "auto" and solver != "hqs"):
-        return None
-    import warnings
-
-    from metasensor.solvers.noise_fit import fit_poisson_gaussian
-
-    if opts.noise_model == "auto":  # quietly global where the fit is refused or imprecise
-        with warnings.catch_warnings():
-            warnings.simplefilter("error", UserWarning)
-            try:
-                return fit_poisson_gaussian(views).model
-            except (ValueError, UserWarning):
-                return None
-    try:
-        return fit_poisson_gaussian(views).model
-    except ValueError as exc:
-        warnings.warn(f"reconstruct: the noise fit failed ({exc}); using one global noise "
-                      "weight", UserWarning, stacklevel=4)
-        return None
-
-
-def _capture_noise(hqs_opts, views):
-    """HQS's ``noise_estimate="poisson-gaussian"`` made a model fitted once on the whole
-    capture's ``views`` (a block may hold too few smooth samples for a fit of its own); left as
-    it is where the fit is refused (each solve then tries its own, or warns)."""
-    from dataclasses import replace
-
-    if hqs_opts.noise_estimate != "poisson-gaussian" or hqs_opts.noise is not None or (
-            views is None):
-        return hqs_opts
-    from metasensor.solvers.noise_fit import fit_poisson_gaussian
-
-    try:
-        return replace(hqs_opts, noise_estimate=fit_poisson_gaussian(views).model)
-    except ValueError:
-        return hqs_opts
-
-
 def _solver_options(opts: ReconOptions, solver: str, n_views: int, step: int, noise=None,
                     views=None):
     """The resolved solver settings (RLOptions or HQSOptions) and RL's subsets; ``noise`` the
@@ -262,7 +220,7 @@ def _solver_options(opts: ReconOptions, solver: str, n_views: int, step: int, no
         hqs_opts = opts.solver_options or HQSOptions()
         if noise is not None and hqs_opts.noise_model is None:
             hqs_opts = replace(hqs_opts, noise_model=noise)
-        return _capture_noise(hqs_opts, views), subsets
+        return capture_noise(hqs_opts, views), subsets
     iterations = DEFAULT_ITERATIONS if opts.iterations is None else int(opts.iterations)
     shifted = noise if noise is not None and noise.a > 0 else None
     return RLOptions(iterations=iterations, subsets=subsets, noise_model=shifted), subsets
@@ -351,7 +309,7 @@ def reconstruct(views, cfg: SystemConfig, method: str = "isa", zernike=None, fie
     mask = cfg.view_mask(opts.view_radius)
     uv = view_order(mask, opts.order)
     dao = block_dao_options(method, cfg, opts.dao, mask, stacklevel=3)
-    noise = _noise_model(views, opts, solver)
+    noise = noise_model(views, opts, solver)
     solver_opts, subsets = _solver_options(opts, solver, len(uv), d, noise, views)
     corners = None
     if opts.space_variant:

@@ -1,0 +1,54 @@
+"""The noise the solvers' data term is weighed by, decided once per capture: the
+Poisson–Gaussian model :class:`~metasensor.recon.options.ReconOptions` asks for, and the model
+behind HQS's ``noise_estimate="poisson-gaussian"``; both fitted on the whole capture
+(:func:`metasensor.solvers.noise_fit.fit_poisson_gaussian`), as one block may hold too few
+smooth samples for a fit of its own."""
+
+from __future__ import annotations
+
+from metasensor.recon.options import ReconOptions
+
+__all__ = ["noise_model", "capture_noise"]
+
+
+def noise_model(views, opts: ReconOptions, solver: str):
+    """The Poisson–Gaussian model ``opts.noise_model`` asks for (fitted here for ``"fit"`` and
+    ``"auto"``: once, on the whole stack), or None for one global weight."""
+    if not isinstance(opts.noise_model, str):
+        return opts.noise_model
+    if opts.noise_model == "global" or (opts.noise_model == "auto" and solver != "hqs"):
+        return None
+    import warnings
+
+    from metasensor.solvers.noise_fit import fit_poisson_gaussian
+
+    if opts.noise_model == "auto":  # quietly global where the fit is refused or imprecise
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", UserWarning)
+            try:
+                return fit_poisson_gaussian(views).model
+            except (ValueError, UserWarning):
+                return None
+    try:
+        return fit_poisson_gaussian(views).model
+    except ValueError as exc:
+        warnings.warn(f"reconstruct: the noise fit failed ({exc}); using one global noise "
+                      "weight", UserWarning, stacklevel=4)
+        return None
+
+
+def capture_noise(hqs_opts, views):
+    """HQS's ``noise_estimate="poisson-gaussian"`` made a model fitted once on the whole
+    capture's ``views`` (a block may hold too few smooth samples for a fit of its own); left as
+    it is where the fit is refused (each solve then tries its own, or warns)."""
+    from dataclasses import replace
+
+    if hqs_opts.noise_estimate != "poisson-gaussian" or hqs_opts.noise is not None or (
+            views is None):
+        return hqs_opts
+    from metasensor.solvers.noise_fit import fit_poisson_gaussian
+
+    try:
+        return replace(hqs_opts, noise_estimate=fit_poisson_gaussian(views).model)
+    except ValueError:
+        return hqs_opts
