@@ -192,17 +192,21 @@ def _plot(rows: list[dict], path: Path) -> None:
     """SSIM against scan period, one panel per focus position."""
     from metasensor.io.figures import new_figure, save_figure
 
+    rows = [r for r in rows if "summary" not in r]
     focus = list(dict.fromkeys(r["defocus_waves"] for r in rows))
-    fig, axes = new_figure(1, len(focus), size=(5 * len(focus), 3.6))
+    # colour: scene and budget; marker: budget; line: the solver series
+    pairs = list(dict.fromkeys((r["scene"], r["budget"]) for r in rows))
+    fig, axes = new_figure(1, len(focus), size=(5.5 * len(focus), 4.2))
     for ax, df in zip(axes[0], focus, strict=True):
         mine = [r for r in rows if r["defocus_waves"] == df]
         for budget, scene, solver in dict.fromkeys(
                 (r["budget"], r["scene"], r["solver"]) for r in mine):
-            sel = [r for r in mine if (r["budget"], r["scene"], r["solver"]) == (budget, scene,
-                                                                               solver)]
+            sel = sorted((r for r in mine if (r["budget"], r["scene"], r["solver"])
+                          == (budget, scene, solver)), key=lambda r: r["scan"])
             ax.plot([r["scan"] for r in sel], [r["ssim"] for r in sel],
                     {"per-frame": "o", "equal-light": "s"}.get(budget, "^")
                     + {"rl": "-", "hqs": ":"}.get(solver, "--"),
+                    color=f"C{pairs.index((scene, budget)) % 10}",
                     label=f"{scene}, {budget}, {solver}")
         ax.set_xscale("log")
         ax.set_xticks(PERIODS, [f"{p}x{p}" for p in PERIODS])
@@ -210,7 +214,7 @@ def _plot(rows: list[dict], path: Path) -> None:
         ax.set_ylabel("SSIM to truth")
         where = "on the MLA's conjugate plane" if df == 0 else f"defocus Z4 = {df:g} λ"
         ax.set_title(f"ISA vs scan period, {where}", fontsize=9)
-        ax.legend(fontsize=6)
+        ax.legend(fontsize=5, ncol=2)
     save_figure(fig, path, dpi=120)
 
 
