@@ -122,3 +122,24 @@ def test_reconstruct_fits_the_model_once_on_the_whole_capture(monkeypatch):
     assert capture_noise(HQSOptions(), cap.views) == HQSOptions()  # the default: untouched
     given = HQSOptions(noise_estimate="poisson-gaussian", noise=1.0)
     assert capture_noise(given, cap.views) is given
+
+
+def test_reconstruct_hands_every_block_the_capture_model(monkeypatch):
+    # blocks of 2 x 2 on a 164-px capture: each block's own samples could not carry a fit (no
+    # fallback warning), and every solve's noise is the capture model's r.m.s. over its samples
+    import metasensor.solvers.hqs as hqs_module
+
+    cfg = ms.SystemConfig()
+    cap = ms.simulate(resolution_chart(10 * 15 + 14), cfg, snr_db=30.0, seed=0,
+                      comparison=False)
+    seen = []
+    real = hqs_module._noise
+    monkeypatch.setattr(hqs_module, "_noise", lambda y, m, o: seen.append(o.noise_estimate)
+                        or real(y, m, o))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", UserWarning)
+        rec = ms.reconstruct(cap.views, cfg, blocks=(2, 2), solver_options=HQSOptions(
+            noise_estimate="poisson-gaussian"))
+    assert np.isfinite(rec.image).all() and rec.image.shape == cap.truth.shape
+    assert len(seen) >= 4 and all(isinstance(n, PoissonGaussian) for n in seen)
+    assert len({(n.a, n.b) for n in seen}) == 1  # one model, fitted once
