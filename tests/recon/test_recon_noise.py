@@ -62,3 +62,29 @@ def test_noise_option_errors_are_named(files):
     assert not (files / "none").exists()
     res = _run(files, "plain.tif", "bad", "--noise", "poisson")
     assert res.exit_code != 0 and "--noise" in str(res.exception)
+
+
+def test_the_hqs_noise_estimate_flags_reach_the_solver_and_the_summary(files, monkeypatch):
+    import metasensor.recon.api as api
+
+    seen = []
+    real = api._solver_options
+    monkeypatch.setattr(api, "_solver_options", lambda *a, **k: seen.append(a[0].solver_options)
+                        or real(*a, **k))
+    args = ["reconstruct", str(files / "plain.tif"), "--psf", str(files / "psf.h5"), "--solver",
+            "hqs", "--noise-estimate", "poisson-gaussian", "--scan-exponent", "0.5", "--out",
+            str(files / "pg")]
+    res = CliRunner().invoke(app, args)
+    assert res.exit_code == 0, res.output
+    assert seen and seen[0].noise_estimate == "poisson-gaussian" and seen[0].scan_exponent == 0.5
+    settings = json.loads((files / "pg" / "summary.json").read_text())["provenance"]["settings"]
+    assert settings["noise_estimate"] == "poisson-gaussian" and settings["scan_exponent"] == 0.5
+    assert np.isfinite(tifffile.imread(files / "pg" / "image.tif")).all()
+
+
+def test_the_hqs_noise_estimate_flags_are_refused_where_they_cannot_apply(files):
+    res = _run(files, "plain.tif", "rl", "--noise-estimate", "poisson-gaussian")
+    assert res.exit_code != 0 and "Richardson-Lucy" in str(res.exception)
+    res = _run(files, "plain.tif", "mad", "--noise-estimate", "mad")
+    assert res.exit_code != 0 and "--noise-estimate" in str(res.exception)
+    assert not (files / "rl").exists() and not (files / "mad").exists()

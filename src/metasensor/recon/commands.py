@@ -58,6 +58,13 @@ class ReconstructArgs:
         "weight) | fit (Poisson-Gaussian, fitted to the views; RL: shifted Poisson) | stored "
         "(Poisson-Gaussian from the views' metadata: gain and read noise, as simulate writes "
         "them)")] = "global"
+    noise_estimate: Annotated[str, typer.Option(
+        "--noise-estimate", help="HQS: the noise that sets the data weight: differences (the "
+        "views' second differences) | poisson-gaussian (the r.m.s. of a Poisson-Gaussian model "
+        "fitted once to the views; texture and sparse scans do not raise it)")] = "differences"
+    scan_exponent: Annotated[float, typer.Option(
+        "--scan-exponent", min=0.0, help="HQS: e of the data weight's scan factor (d/3)^e, d "
+        "the scan step in pixels (no effect at d = 3, the 5 x 5 scan of 15-px lenslets)")] = 2.0
     iterations: Annotated[int | None, typer.Option(help="Richardson-Lucy iterations")] = None
     subsets: Annotated[int | None, typer.Option(help="view subsets per iteration")] = None
     view_radius: Annotated[float | None, typer.Option(
@@ -99,6 +106,16 @@ class ReconstructArgs:
         if self.noise not in NOISE_CHOICES:
             raise ValueError(f"--noise must be one of {', '.join(NOISE_CHOICES)}, got "
                              f"{self.noise!r}")
+        from metasensor.solvers.hqs_options import NOISE_ESTIMATES
+
+        if self.noise_estimate not in NOISE_ESTIMATES:
+            raise ValueError(f"--noise-estimate must be one of {', '.join(NOISE_ESTIMATES)}, "
+                             f"got {self.noise_estimate!r}")
+        if self.hqs_options is not None and (self.isa_solver == "rl" or self.iterations
+                                             is not None or self.subsets is not None):
+            raise ValueError("--noise-estimate/--scan-exponent set HQS's data weight: not with "
+                             "Richardson-Lucy (--solver rl, --quality fast, --iterations, "
+                             "--subsets)")
         from metasensor.recon.dao_choice import DAO_CHOICES
 
         if self.quality not in ("default", "fast"):
@@ -116,6 +133,15 @@ class ReconstructArgs:
         return "none" if self.quality == "fast" and self.method == "auto" else self.method
 
     @property
+    def hqs_options(self):
+        """HQSOptions with ``--noise-estimate`` / ``--scan-exponent`` (None: both default)."""
+        from metasensor.solvers.hqs_options import HQSOptions
+
+        if (self.noise_estimate, self.scan_exponent) == ("differences", 2.0):
+            return None
+        return HQSOptions(noise_estimate=self.noise_estimate, scan_exponent=self.scan_exponent)
+
+    @property
     def isa_solver(self) -> str | None:
         """The solver asked for (None: the default rule)."""
         return "rl" if self.quality == "fast" else self.solver
@@ -128,7 +154,8 @@ class ReconstructArgs:
                            "system": self.system, "field_zernike": self.field_zernike},
                           {"method": self.dao, "blocks": self.blocks, "quality": self.quality,
                            "overlap": self.overlap, "solver": self.solver,
-                           "noise": self.noise,
+                           "noise": self.noise, "noise_estimate": self.noise_estimate,
+                           "scan_exponent": self.scan_exponent,
                            "iterations": self.iterations, "subsets": self.subsets,
                            "view_radius": self.view_radius, "zernike": self.zernike,
                            "config": cfg.to_dict()})
@@ -151,7 +178,7 @@ def _recon_options(args: ReconstructArgs, inputs, target):
     bank = inputs.bank
     return ReconOptions(overlap=args.overlap, iterations=args.iterations, subsets=args.subsets,
                         solver=args.isa_solver, register=args.register_views,
-                        noise_model=_noise_model(args, inputs),
+                        noise_model=_noise_model(args, inputs), solver_options=args.hqs_options,
                         view_radius=args.view_radius, device=args.device, psf=bank,
                         scheduler=args.scheduler, num_workers=args.workers, out=target,
                         progress=True)
