@@ -122,6 +122,9 @@ def test_reconstruct_fits_the_model_once_on_the_whole_capture(monkeypatch):
     assert capture_noise(HQSOptions(), cap.views) == HQSOptions()  # the default: untouched
     given = HQSOptions(noise_estimate="poisson-gaussian", noise=1.0)
     assert capture_noise(given, cap.views) is given
+    weighted = HQSOptions(noise_estimate="poisson-gaussian", noise_model=PoissonGaussian(1, 1))
+    assert capture_noise(weighted, cap.views) is weighted
+    assert calls == [cap.views.shape]  # neither of the last two fitted
 
 
 def test_reconstruct_hands_every_block_the_capture_model(monkeypatch):

@@ -267,8 +267,8 @@ def fitted_noise_rms(data, mask=None, options: NoiseFitOptions = NoiseFitOptions
     ValueError
         Where the views do not support the fit (:func:`fit_poisson_gaussian`).
     """
-    y, _ = _samples(data, mask)
-    return model_noise_rms(fit_poisson_gaussian(y, options).model, data, mask)
+    y, m = _samples(data, mask)
+    return _model_rms(fit_poisson_gaussian(y, options).model, y, m)
 
 
 def model_noise_rms(model: PoissonGaussian, data, mask=None) -> float:
@@ -290,7 +290,11 @@ def model_noise_rms(model: PoissonGaussian, data, mask=None) -> float:
     float
         Noise r.m.s., data units.
     """
-    y, m = _samples(data, mask)
+    return _model_rms(model, *_samples(data, mask))
+
+
+def _model_rms(model: PoissonGaussian, y: np.ndarray, m: np.ndarray) -> float:
+    """:func:`model_noise_rms` on samples and mask already in NumPy."""
     obs = y[:, m]
     if not obs.size:
         raise ValueError("no observed samples to measure the noise on")
