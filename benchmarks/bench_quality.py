@@ -192,14 +192,19 @@ def run(quick: bool = False, sink=None) -> list[dict]:
             rows += [{**r, "study": "focus"} for r in new]
         if sink is not None:
             sink(rows)
-    if not quick and ABERRATED_JSON.is_file():
-        rows += json.loads(ABERRATED_JSON.read_text())["rows"]
-    if not quick and (HERE / "results" / "quality_photos.json").is_file():  # --photos rows
-        rows += json.loads((HERE / "results" / "quality_photos.json").read_text())["rows"]
-    if not quick and DEMO_JSON.is_file():
-        rows += json.loads(DEMO_JSON.read_text())["rows"]
+    if not quick:  # the slow studies' measured rows, as their own runs wrote them
+        for path in (ABERRATED_JSON, HERE / "results" / "quality_photos.json", DEMO_JSON):
+            rows += measured_rows(path)
     _plot(rows, HERE / "results" / ("quality_quick.png" if quick else "quality.png"))
     return rows
+
+
+def measured_rows(path: Path) -> list[dict]:
+    """The measured rows of a results file (its summary rows left out: they are recomputed
+    over the merged table), or [] where the file is missing."""
+    if not path.is_file():
+        return []
+    return [r for r in json.loads(path.read_text())["rows"] if "summary" not in r]
 
 
 def run_aberrated(quick: bool = False) -> list[dict]:

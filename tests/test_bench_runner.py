@@ -103,3 +103,17 @@ def test_help_prints_the_docstring_and_exits():
     assert lines[0] == first  # the docstring, then the usage line, and no row of a run
     assert lines[-1].startswith("usage: python benchmarks/bench_metrics.py")
     assert not any(line.startswith("{") for line in lines)
+
+
+def test_the_quality_table_merges_measured_rows_without_their_summaries(tmp_path):
+    # the photographs' file carries summary rows (no "study"); merged as they were, they broke
+    # the full quality run's figure
+    path = RUN_ALL.parent / "bench_quality.py"
+    spec = importlib.util.spec_from_file_location("bench_quality_under_test", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    results = tmp_path / "photos.json"
+    results.write_text(json.dumps({"rows": [{"study": "photos-focus", "ssim": 0.8},
+                                            {"summary": "a target", "holds": True}]}))
+    assert module.measured_rows(results) == [{"study": "photos-focus", "ssim": 0.8}]
+    assert module.measured_rows(tmp_path / "missing.json") == []
