@@ -11,7 +11,7 @@ import metasensor as ms
 from metasensor.phasespace.operator import PhaseSpaceOperator, make_geometry
 from metasensor.simulation.scenes import resolution_chart
 from metasensor.solvers.hqs import HQSOptions, estimate_noise
-from metasensor.solvers.noise_fit import fitted_noise_rms, model_noise_rms
+from metasensor.solvers.noise_fit import fitted_noise_rms
 from metasensor.solvers.noise_model import PoissonGaussian
 from recon_standin import one_torch_thread  # noqa: F401
 
@@ -43,16 +43,18 @@ def test_the_fitted_model_reads_the_drawn_noise_where_the_differences_read_the_s
 
 
 def test_model_noise_is_the_model_at_the_observed_mean_level():
-    y = np.full((3, 4, 5), 100.0, np.float32)
+    y = torch.full((3, 4, 5), 100.0)
     y[:, :, -1] = 1e6  # unobserved: left out
-    mask = np.ones((4, 5), bool)
+    y[:, 0, 0] = -50.0  # below the zero level: no negative variance
+    mask = torch.ones((4, 5), dtype=torch.bool)
     mask[:, -1] = False
     model = PoissonGaussian(a=2.0, b=25.0)
-    assert model_noise_rms(model, y, mask) == pytest.approx(np.sqrt(2.0 * 100 + 25), rel=1e-6)
+    expect = np.sqrt((15 * (2.0 * 100 + 25) + 25) / 16)  # 16 observed positions per view
+    assert model.rms(y, mask) == pytest.approx(expect, rel=1e-6)
     with pytest.raises(ValueError, match="observed"):
-        model_noise_rms(model, y, np.zeros((4, 5), bool))
+        model.rms(y, torch.zeros((4, 5), dtype=torch.bool))
     with pytest.raises(ValueError, match="V, My, Mx"):
-        model_noise_rms(model, y[0])
+        model.rms(y[0])
 
 
 def _weight(options: HQSOptions, d: int, side: int = 24):

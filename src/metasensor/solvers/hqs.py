@@ -56,7 +56,7 @@ from metasensor.phasespace.masked_normal import BandNormal
 from metasensor.phasespace.normal import FoldedNormal
 from metasensor.phasespace.operator import PhaseSpaceOperator
 from metasensor.solvers.hqs_options import HQSOptions
-from metasensor.solvers.noise_fit import fitted_noise_rms, model_noise_rms
+from metasensor.solvers.noise_fit import fitted_noise_rms
 from metasensor.solvers.noise_model import PoissonGaussian, misfit_weights, sample_weights
 from metasensor.solvers.pcg import preconditioned_cg
 from metasensor.solvers.priors import GRADIENT, Transform
@@ -110,7 +110,7 @@ def _noise(y: torch.Tensor, m: torch.Tensor, options: HQSOptions) -> float:
     if options.noise is not None:
         return float(options.noise)
     if isinstance(options.noise_estimate, PoissonGaussian):
-        return model_noise_rms(options.noise_estimate, y, m)
+        return options.noise_estimate.rms(y, m)
     if options.noise_estimate == "poisson-gaussian":
         try:
             return fitted_noise_rms(y, m)

@@ -40,7 +40,7 @@ class HQSOptions:
         solved samples' smooth parts (:func:`~metasensor.solvers.noise_fit.fitted_noise_rms`;
         where they do not support the fit, the differences, with a warning); a
         ``PoissonGaussian``: that model's r.m.s. over the solved samples
-        (``sqrt(a·mean(y) + b)``; ``reconstruct`` fits it once on the whole capture, as small
+        (``PoissonGaussian.rms``; ``reconstruct`` fits it once on the whole capture, as small
         blocks hold too few smooth samples for a fit of their own).
     scan_exponent : float
         ``e`` of λ's scan factor ``(d / 3)^e`` (module docstring), >= 0 (default 2).

@@ -33,8 +33,7 @@ import numpy as np
 
 from metasensor.solvers.noise_model import PoissonGaussian
 
-__all__ = ["NoiseFitOptions", "NoiseFit", "fit_poisson_gaussian", "fitted_noise_rms",
-           "model_noise_rms"]
+__all__ = ["NoiseFitOptions", "NoiseFit", "fit_poisson_gaussian", "fitted_noise_rms"]
 
 MAD_SIGMA = 1.4826  # σ of a normal distribution per median absolute deviation
 MAD_VAR_EFFICIENCY = 2.72  # variance of a MAD-based σ² estimate over the sample variance's
@@ -242,16 +241,16 @@ def fit_poisson_gaussian(views, options: NoiseFitOptions = NoiseFitOptions()) ->
 def fitted_noise_rms(data, mask=None, options: NoiseFitOptions = NoiseFitOptions()) -> float:
     """The r.m.s. noise of view samples under their own fitted Poisson–Gaussian model.
 
-    ``sqrt(mean(a·max(y, 0) + b))`` over the observed samples, ``(a, b)`` from
+    ``PoissonGaussian.rms`` over the observed samples, ``(a, b)`` from
     :func:`fit_poisson_gaussian` on the same samples. Unlike a global median of second
     differences, the fit reads only smooth samples, so texture and the coarse samples of a
     sparse scan do not raise it.
 
     Parameters
     ----------
-    data : array_like or torch.Tensor
+    data : torch.Tensor or array_like
         ``(V, My, Mx)`` view samples (data units, zero level at 0); not modified.
-    mask : array_like, optional
+    mask : torch.Tensor or array_like, optional
         ``(My, Mx)`` bool, True on observed samples (unobserved ones are zero, which the fit
         leaves out as clipped); default all.
     options : NoiseFitOptions
@@ -267,46 +266,10 @@ def fitted_noise_rms(data, mask=None, options: NoiseFitOptions = NoiseFitOptions
     ValueError
         Where the views do not support the fit (:func:`fit_poisson_gaussian`).
     """
-    y, m = _samples(data, mask)
-    return _model_rms(fit_poisson_gaussian(y, options).model, y, m)
+    import torch
 
-
-def model_noise_rms(model: PoissonGaussian, data, mask=None) -> float:
-    """The r.m.s. noise of view samples under a given Poisson–Gaussian model:
-    ``sqrt(a·mean(max(y, 0)) + b)`` over the observed samples (the model's variance is linear in
-    the level, so its mean over the samples is that at their mean level).
-
-    Parameters
-    ----------
-    model : PoissonGaussian
-        ``var(y) = a·y + b`` (data units).
-    data : array_like or torch.Tensor
-        ``(V, My, Mx)`` view samples (data units); not modified.
-    mask : array_like, optional
-        ``(My, Mx)`` bool, True on observed samples; default all.
-
-    Returns
-    -------
-    float
-        Noise r.m.s., data units.
-    """
-    return _model_rms(model, *_samples(data, mask))
-
-
-def _model_rms(model: PoissonGaussian, y: np.ndarray, m: np.ndarray) -> float:
-    """:func:`model_noise_rms` on samples and mask already in NumPy."""
-    obs = y[:, m]
-    if not obs.size:
-        raise ValueError("no observed samples to measure the noise on")
-    level = float(np.clip(obs, 0.0, None).mean(dtype=np.float64))
-    return float(math.sqrt(max(model.a * level + model.b, 0.0)))
-
-
-def _samples(data, mask) -> tuple[np.ndarray, np.ndarray]:
-    """``(V, My, Mx)`` float32 samples and their ``(My, Mx)`` bool mask (NumPy)."""
-    y = np.asarray(data.detach().cpu() if hasattr(data, "detach") else data, dtype=np.float32)
+    y = torch.as_tensor(data)
     if y.ndim != 3:
-        raise ValueError(f"data must be (V, My, Mx) view samples, got shape {y.shape}")
-    m = np.ones(y.shape[1:], bool) if mask is None else np.asarray(
-        mask.detach().cpu() if hasattr(mask, "detach") else mask, dtype=bool)
-    return y, m
+        raise ValueError(f"data must be (V, My, Mx) view samples, got shape {tuple(y.shape)}")
+    model = fit_poisson_gaussian(y.detach().cpu().numpy(), options).model
+    return model.rms(y, None if mask is None else torch.as_tensor(mask))

@@ -114,6 +114,27 @@ class PoissonGaussian:
         """``a·max(y, 0) + b`` (data units²) of samples ``y``."""
         return torch.clamp(y, min=0.0) * self.a + self.b
 
+    def rms(self, y: torch.Tensor, mask: torch.Tensor | None = None) -> float:
+        """The noise r.m.s. (data units) of view samples under this model: the square root of
+        :meth:`variance`'s mean over the observed samples.
+
+        Parameters
+        ----------
+        y : torch.Tensor
+            ``(V, My, Mx)`` view samples (data units); not modified.
+        mask : torch.Tensor, optional
+            ``(My, Mx)`` bool, True on observed samples; default all.
+        """
+        if y.ndim != 3:
+            raise ValueError(f"y must be (V, My, Mx) view samples, got shape {tuple(y.shape)}")
+        m = (torch.ones(y.shape[1:], dtype=torch.bool, device=y.device) if mask is None
+             else mask.to(device=y.device, dtype=torch.bool))
+        n = int(m.sum()) * y.shape[0]
+        if not n:
+            raise ValueError("no observed samples to measure the noise on")
+        total = float((self.variance(y) * m).sum(dtype=torch.float64))
+        return math.sqrt(max(total / n, 0.0))
+
 
 def sample_weights(model: PoissonGaussian, level: torch.Tensor, mask: torch.Tensor
                    ) -> tuple[torch.Tensor | None, float]:
