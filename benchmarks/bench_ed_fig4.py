@@ -41,6 +41,9 @@ import numpy as np
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent / "src"))
+sys.path.insert(0, str(HERE))  # _paths: where figures go
+
+from _paths import output_path  # noqa: E402
 
 LEVELS = (0.5, 1.0, 3.0)
 SIM_EXTRA = 20  # pixels per side the simulation's PSF window exceeds the reconstructions'
@@ -243,8 +246,8 @@ def run(quick: bool = False) -> list[dict]:
     # (a run of ~45 min on 2 cores); delete the file to start afresh
     import json
 
-    done_file = HERE / "results" / ("ed_fig4_quick_cases.jsonl" if quick else
-                                    "ed_fig4_cases.jsonl")
+    done_file = output_path("ed_fig4_quick_cases.jsonl" if quick else
+                            "ed_fig4_cases.jsonl")
     if os.environ.get("ED_FIG4_CASES"):
         done_file = Path(os.environ["ED_FIG4_CASES"])
     done: dict = {}
@@ -263,7 +266,7 @@ def run(quick: bool = False) -> list[dict]:
             with done_file.open("a") as f:
                 f.writelines(json.dumps(r) + "\n" for r in new)
             rows += new
-    figure(rows, HERE / "results" / ("ed_fig4_quick.png" if quick else "ed_fig4.png"))
+    figure(rows, output_path("ed_fig4_quick.png" if quick else "ed_fig4.png"))
     return rows + summary(rows)
 
 

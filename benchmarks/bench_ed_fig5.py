@@ -26,6 +26,8 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent / "src"))
 sys.path.insert(0, str(HERE))
 
+from _paths import output_path  # noqa: E402
+
 LEVELS = (0.0, 1.0, 2.0)
 SNRS = (3.0, 10.0, 20.0, 30.0, 40.0)
 BIG_LEVEL = 2.0  # from this level on, blocks of bench_ed_fig4.BIG_BLOCK px
@@ -104,7 +106,7 @@ def run(quick: bool = False) -> list[dict]:
             for snr in snrs:
                 rows += fig4.one_case("camera", v, 0, px, 3 if not quick else 2, snr_db=snr,
                                       methods=("wave",))
-    figure(rows, HERE / "results" / ("ed_fig5_quick.png" if quick else "ed_fig5.png"))
+    figure(rows, output_path("ed_fig5_quick.png" if quick else "ed_fig5.png"))
     return rows + summary(rows)
 
 

@@ -24,6 +24,9 @@ import numpy as np
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent / "src"))
+sys.path.insert(0, str(HERE))  # _paths: where figures go
+
+from _paths import output_path  # noqa: E402
 
 SNRS = (20.0, 30.0, 40.0, 50.0, 60.0, None)
 LAMS = (1e-7, 1e-6, 1e-5, 1e-4, 1e-3, 1e-2, 3e-2, 0.1, 0.3)
@@ -108,7 +111,7 @@ def _quality_rows(quick: bool) -> list[dict]:
 
 def run(quick: bool = False) -> list[dict]:
     rows = _spectrum_rows(quick) + _quality_rows(quick)
-    _plot(rows, HERE / "results" / ("isa_limit_quick.png" if quick else "isa_limit.png"))
+    _plot(rows, output_path("isa_limit_quick.png" if quick else "isa_limit.png"))
     return rows
 
 

@@ -24,6 +24,9 @@ import numpy as np
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent / "src"))
+sys.path.insert(0, str(HERE))  # _paths: where figures go
+
+from _paths import output_path  # noqa: E402
 
 ERRORS_FULL = (0.0, 0.025, 0.05, 0.1, 0.2)
 ERRORS_QUICK = (0.0, 0.1)
@@ -53,7 +56,7 @@ def run(quick: bool = False) -> list[dict]:
                              "registration_px": [round(h, 4) for h in rec.registration[0][0]],
                              "seconds": time.perf_counter() - t0})
     if not quick:
-        _plot(rows, HERE / "results" / "isa_mismatch.png")
+        _plot(rows, output_path("isa_mismatch.png"))
     return rows
 
 

@@ -28,6 +28,9 @@ from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent / "src"))
+sys.path.insert(0, str(HERE))  # _paths: where figures go
+
+from _paths import output_path  # noqa: E402
 
 CASES_FULL = {"chart": (128, 192, 256, 384, 512), "camera": (192, 256, 512),
               "astronaut": (192, 256, 512), "coffee": (256, 512), "chelsea": (256, 512)}
@@ -52,7 +55,7 @@ def run(quick: bool = False) -> list[dict]:
             row.update(denoised_2d(cap, cap.truth, rng))
             rows.append({"scene": name, "size": size, **row})
     if not quick:
-        _plot(rows, HERE / "results" / "isa_quality.png")
+        _plot(rows, output_path("isa_quality.png"))
     return rows
 
 

@@ -29,6 +29,8 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent / "src"))
 sys.path.insert(0, str(HERE))  # bench_isa_quality: measure, finish_ssim_plot
 
+from _paths import output_path  # noqa: E402
+
 SNRS = (30.0, 35.0, 40.0, 50.0, 60.0, None)
 CASES_FULL = (("camera", 192), ("coffee", 512))
 
@@ -48,7 +50,7 @@ def run(quick: bool = False) -> list[dict]:
             cap = ms.simulate(scene, cfg, snr_db=snr, seed=0)
             rows.append({"scene": name, "size": size, "snr_target": snr, **measure(cap)})
     if not quick:
-        _plot(rows, HERE / "results" / "isa_snr.png")
+        _plot(rows, output_path("isa_snr.png"))
     return rows
 
 

@@ -56,6 +56,9 @@ import numpy as np
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent / "src"))
+sys.path.insert(0, str(HERE))  # _paths: where figures go
+
+from _paths import output_path  # noqa: E402
 
 NATURAL = ("camera", "astronaut", "coffee", "chelsea", "rocket", "grass")
 SCENES_FULL = ("chart", "bars") + NATURAL
@@ -195,7 +198,7 @@ def run(quick: bool = False, sink=None) -> list[dict]:
     if not quick:  # the slow studies' measured rows, as their own runs wrote them
         for path in (ABERRATED_JSON, HERE / "results" / "quality_photos.json", DEMO_JSON):
             rows += measured_rows(path)
-    _plot(rows, HERE / "results" / ("quality_quick.png" if quick else "quality.png"))
+    _plot(rows, output_path("quality_quick.png" if quick else "quality.png"))
     return rows
 
 

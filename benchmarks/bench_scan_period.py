@@ -50,6 +50,9 @@ import numpy as np
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent / "src"))
+sys.path.insert(0, str(HERE))  # _paths: where figures go
+
+from _paths import output_path  # noqa: E402
 
 PERIODS = (1, 3, 5, 15)
 DEFOCUS = (0.0, 0.25)  # Noll Z4 [waves r.m.s.]: on the MLA's conjugate plane, and off it
@@ -161,7 +164,7 @@ def run(quick: bool = False) -> list[dict]:
                          "seconds": sec, "truth_scale": k,
                          **({"iterations": rec.iterations, "subsets": rec.subsets}
                             if solver == "rl" else {"hqs_steps": len(rec.history[0][0])})})
-    _plot(rows, HERE / "results" / ("scan_period_quick.png" if quick else "scan_period.png"))
+    _plot(rows, output_path("scan_period_quick.png" if quick else "scan_period.png"))
     return rows + _targets(rows)
 
 

@@ -38,6 +38,9 @@ import numpy as np
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent / "src"))
+sys.path.insert(0, str(HERE))  # _paths: where figures go
+
+from _paths import output_path  # noqa: E402
 
 FULL = {"sensor": (6004, 7920), "blocks": "8x8"}
 QUICK = {"sensor": (1204, 1204), "blocks": "2x2"}
@@ -211,7 +214,7 @@ def _reconstruct_row(store, out, mode, case, cfg, cap, truth, shape, image_shape
            "ssim_crop": ssim(truth=tiled, image=crop, data_range=rng),
            "ssim_middle_tile_alone": ssim(truth=truth, image=alone, data_range=rng)}
     if case is FULL:
-        dest = HERE / "results" / f"stream_reconstruction_{solver}.png"
+        dest = output_path(f"stream_reconstruction_{solver}.png")
         shutil.copyfile(out / "reconstruction.png", dest)
     shutil.rmtree(out, ignore_errors=True)
     return row

@@ -34,12 +34,17 @@ from __future__ import annotations
 
 import importlib.util
 import json
+import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
 HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))  # _paths: where figures go
+
+from _paths import output_path  # noqa: E402
+
 PHOTOS_JSON = HERE / "results" / "quality_photos.json"
 PHOTOS = ("camera", "astronaut", "coffee", "chelsea", "rocket", "grass")
 SIZE = 256
@@ -199,7 +204,7 @@ def run(studies=("aberrated", "focus", "solver")) -> list[dict]:
         rows += new
         _save(rows)
         print(json.dumps(new[0], default=float), flush=True)
-    plot(rows, HERE / "results" / "quality_photos.png")
+    plot(rows, output_path("quality_photos.png"))
     return rows + targets(rows)
 
 

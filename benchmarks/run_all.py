@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 import importlib.util
 import json
+import os
 import platform
 import sys
 import time
@@ -18,6 +19,7 @@ from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent / "src"))
+sys.path.insert(0, str(HERE))  # _paths
 
 from metasensor.io.atomic import atomic_write_text  # noqa: E402
 from metasensor.io.memory import reset_peak_resident  # noqa: E402
@@ -73,6 +75,21 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     if args.names:
         files = [f for f in files if f.stem.removeprefix("bench_") in args.names]
+    from _paths import ENV  # figures and case lists go beside the JSON (benchmarks/_paths.py)
+
+    previous = os.environ.get(ENV)
+    os.environ[ENV] = str(Path(args.out).resolve())
+    try:
+        return _run(files, args)
+    finally:
+        if previous is None:
+            os.environ.pop(ENV, None)
+        else:
+            os.environ[ENV] = previous
+
+
+def _run(files: list[Path], args) -> int:
+    """Run each benchmark file, writing its JSON table into ``args.out``; 1 if any failed."""
     failed = 0
     for file in files:
         name = file.stem.removeprefix("bench_")

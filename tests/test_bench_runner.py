@@ -117,3 +117,40 @@ def test_the_quality_table_merges_measured_rows_without_their_summaries(tmp_path
                                             {"summary": "a target", "holds": True}]}))
     assert module.measured_rows(results) == [{"study": "photos-focus", "ssim": 0.8}]
     assert module.measured_rows(tmp_path / "missing.json") == []
+
+
+def test_figures_follow_the_out_folder_and_the_setting_is_restored(run_all, tmp_path,
+                                                                    monkeypatch):
+    monkeypatch.delenv("METASENSOR_BENCH_OUT", raising=False)
+    (run_all.HERE / "bench_where.py").write_text(
+        "import os\ndef run(quick=False):\n"
+        "    return [{'out': os.environ.get('METASENSOR_BENCH_OUT')}]\n")
+    out = tmp_path / "elsewhere"
+    assert run_all.main(["where", "--out", str(out)]) == 0
+    rows = json.loads((out / "where.json").read_text())["rows"]
+    assert rows == [{"out": str(out.resolve())}]
+    import os
+
+    assert "METASENSOR_BENCH_OUT" not in os.environ
+
+
+def test_output_path_reads_the_run_folder(tmp_path, monkeypatch):
+    spec = importlib.util.spec_from_file_location("bench_paths", RUN_ALL.parent / "_paths.py")
+    paths = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(paths)
+    monkeypatch.setenv("METASENSOR_BENCH_OUT", str(tmp_path / "new"))
+    assert paths.output_path("a.png") == tmp_path / "new" / "a.png"
+    assert (tmp_path / "new").is_dir()
+    monkeypatch.delenv("METASENSOR_BENCH_OUT")
+    assert paths.output_path("a.png") == RUN_ALL.parent / "results" / "a.png"
+
+
+def test_no_benchmark_writes_a_figure_into_the_recorded_results_directly():
+    import re
+
+    for script in sorted(RUN_ALL.parent.glob("*.py")):
+        if script.name in ("rerun.py", "_paths.py"):  # rerun.py re-records on purpose
+            continue
+        text = script.read_text()
+        hits = re.findall(r'HERE / "results" / [^\n]*\.(?:png|jsonl)', text)
+        assert not hits, f"{script.name}: {hits} (use _paths.output_path)"
