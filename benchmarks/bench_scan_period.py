@@ -30,9 +30,11 @@ Two ISA solvers (``solver``): ``rl``, Richardson–Lucy (every period), and ``hq
 sparse-gradient prior (``reconstruct``'s default where it applies: periods 3, 5, 15; a 1x1 scan
 would need 225 x 225 systems per frequency).
 
-A third series, ``hqs-pg``, is HQS with the data weight's noise from the capture's
-Poisson–Gaussian fit and the scan factor ``(d / 3)^0.5`` (``CANDIDATE``: a candidate default,
-measured beside the default; ``docs/decisions.md``).
+A third series, ``hqs-pg``, is HQS with ``noise_estimate="auto"`` (``CANDIDATE``: a candidate
+default, measured beside the default; ``docs/decisions.md``): the data weight's noise from the
+capture's Poisson–Gaussian fit, with the scan factor ``(d / 3)^0.5`` and the misfit gate 0.95,
+where the views follow that model; the default's second differences elsewhere (views without
+measurable noise).
 
 Subsets of the full run (the same sizes and rows, for a re-run on a busy machine):
 ``SCAN_PERIOD_BUDGETS=per-frame`` (comma-separated budgets), ``SCAN_PERIOD_FOCUS=0,0.25``
@@ -58,7 +60,7 @@ PERIODS = (1, 3, 5, 15)
 DEFOCUS = (0.0, 0.25)  # Noll Z4 [waves r.m.s.]: on the MLA's conjugate plane, and off it
 SOLVERS = ("rl", "hqs", "hqs-pg")
 #: settings of the ``hqs-pg`` series
-CANDIDATE = {"noise_estimate": "poisson-gaussian", "scan_exponent": 0.5}
+CANDIDATE = {"noise_estimate": "auto"}
 
 
 def truth_scale(cap, bank) -> float:

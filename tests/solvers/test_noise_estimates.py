@@ -74,7 +74,7 @@ def _weight(options: HQSOptions, d: int, side: int = 24):
     nm = op.normal()
     smooth = FoldedXStep(nm, op.masked_normal(m, nm), m, GRADIENT, REG_FLOOR, INIT_CG, True)
     aty = op.adjoint(y / unit)
-    return _data_weight(op, smooth, aty, y, m, unit, options), _noise(y, m, options)
+    return _data_weight(op, smooth, aty, y, m, unit, options), _noise(y, m, options)[0]
 
 
 def test_the_scan_exponent_scales_the_data_weight_by_d_over_3():
@@ -148,3 +148,52 @@ def test_reconstruct_hands_every_block_the_capture_model(monkeypatch):
     assert np.isfinite(rec.image).all() and rec.image.shape == cap.truth.shape
     assert len(seen) >= 4 and all(isinstance(n, PoissonGaussian) for n in seen)
     assert len({(n.a, n.b) for n in seen}) == 1  # one model, fitted once
+
+
+def test_auto_settings_follow_the_noise_measurement():
+    from metasensor.solvers.hqs_options import ESTIMATE_SETTINGS
+
+    auto = HQSOptions()
+    assert auto.data_weight_settings("differences") == ESTIMATE_SETTINGS["differences"] == (2.0,
+                                                                                            1.1)
+    assert auto.data_weight_settings("poisson-gaussian") == (0.5, 0.95)
+    fixed = HQSOptions(scan_exponent=1.0, misfit_weights=None)
+    assert fixed.data_weight_settings("poisson-gaussian") == (1.0, None)
+    # a given model's σ takes the Poisson-Gaussian exponent 0.5, a given noise the
+    # differences' 2: the same σ (3) weighs (5/3)^(0.5 - 2) as much at d = 5, alike at d = 3
+    model = PoissonGaussian(a=0.0, b=9.0)
+    lam5, sigma = _weight(HQSOptions(noise_estimate=model), d=5)
+    lam5_given, _ = _weight(HQSOptions(noise=3.0), d=5)
+    assert sigma == pytest.approx(3.0, rel=1e-6)
+    assert lam5 / lam5_given == pytest.approx((5 / 3) ** (0.5 - 2), rel=1e-6)
+    lam3, _ = _weight(HQSOptions(noise_estimate=model), d=3)
+    lam3_given, _ = _weight(HQSOptions(noise=3.0), d=3)
+    assert lam3 == pytest.approx(lam3_given, rel=1e-6)
+
+
+@pytest.fixture(scope="module")
+def chart_5x5_noisy_and_clean():
+    cfg = ms.SystemConfig()
+    scene = resolution_chart(10 * 15 + 14)
+    return [ms.simulate(scene, cfg, snr_db=snr, seed=0, comparison=False).views
+            for snr in (30.0, None)]
+
+
+def test_auto_fits_noisy_views_and_falls_back_on_views_without_noise(chart_5x5_noisy_and_clean):
+    from metasensor.recon.noise import capture_noise
+    from metasensor.solvers.noise_fit import MAX_LACK_OF_FIT, fit_poisson_gaussian
+
+    noisy, clean = chart_5x5_noisy_and_clean
+    fit = fit_poisson_gaussian(noisy)
+    assert fit.holds() and fit.lack_of_fit < MAX_LACK_OF_FIT / 10
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)
+        quantised = fit_poisson_gaussian(clean)  # the scene's structure, not noise
+    assert not quantised.holds() and quantised.lack_of_fit > 2 * MAX_LACK_OF_FIT
+    opts = capture_noise(HQSOptions(noise_estimate="auto"), noisy)
+    assert isinstance(opts.noise_estimate, PoissonGaussian)
+    assert opts.noise_estimate == fit.model
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # quietly
+        back = capture_noise(HQSOptions(noise_estimate="auto"), clean)
+    assert back == HQSOptions(noise_estimate="differences")

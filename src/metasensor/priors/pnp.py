@@ -72,4 +72,5 @@ def pnp_options(strength: float = 1.0, lam_scale: float = 3.0):
     from metasensor.solvers.splitting import Continuation
 
     return HQSOptions(prior=DenoiserPrior(strength=strength), lam_scale=lam_scale,
-                      continuation=Continuation(beta0=25.0, beta_max=4096.0, beta_rate=2.0))
+                      continuation=Continuation(beta0=25.0, beta_max=4096.0, beta_rate=2.0),
+                      noise_estimate="differences")  # the noise lam_scale was chosen with

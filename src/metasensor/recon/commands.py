@@ -61,10 +61,12 @@ class ReconstructArgs:
     noise_estimate: Annotated[str, typer.Option(
         "--noise-estimate", help="HQS: the noise that sets the data weight: differences (the "
         "views' second differences) | poisson-gaussian (the r.m.s. of a Poisson-Gaussian model "
-        "fitted once to the views; texture and sparse scans do not raise it)")] = "differences"
-    scan_exponent: Annotated[float, typer.Option(
+        "fitted once to the views; texture and sparse scans do not raise it) | auto (that fit "
+        "where the views follow it, else the differences)")] = "differences"
+    scan_exponent: Annotated[float | None, typer.Option(
         "--scan-exponent", min=0.0, help="HQS: e of the data weight's scan factor (d/3)^e, d "
-        "the scan step in pixels (no effect at d = 3, the 5 x 5 scan of 15-px lenslets)")] = 2.0
+        "the scan step in pixels (no effect at d = 3, the 5 x 5 scan of 15-px lenslets); "
+        "default: 2 with the differences, 0.5 with a Poisson-Gaussian noise")] = None
     iterations: Annotated[int | None, typer.Option(help="Richardson-Lucy iterations")] = None
     subsets: Annotated[int | None, typer.Option(help="view subsets per iteration")] = None
     view_radius: Annotated[float | None, typer.Option(
@@ -137,9 +139,11 @@ class ReconstructArgs:
         """HQSOptions with ``--noise-estimate`` / ``--scan-exponent`` (None: both default)."""
         from metasensor.solvers.hqs_options import HQSOptions
 
-        if (self.noise_estimate, self.scan_exponent) == ("differences", 2.0):
+        if (self.noise_estimate, self.scan_exponent) == ("differences", None):
             return None
-        return HQSOptions(noise_estimate=self.noise_estimate, scan_exponent=self.scan_exponent)
+        return HQSOptions(noise_estimate=self.noise_estimate,
+                          scan_exponent="auto" if self.scan_exponent is None
+                          else self.scan_exponent)
 
     @property
     def isa_solver(self) -> str | None:

@@ -38,15 +38,23 @@ def noise_model(views, opts: ReconOptions, solver: str):
 
 
 def capture_noise(hqs_opts, views):
-    """HQS's ``noise_estimate="poisson-gaussian"`` made a model fitted once on the whole
-    capture's ``views`` (a block may hold too few smooth samples for a fit of its own); left as
-    it is where the fit is refused (each solve then tries its own, or warns), where the noise
-    is given, and where a ``noise_model`` weighs the samples (its own σ is used then)."""
+    """HQS's ``noise_estimate`` ``"poisson-gaussian"`` or ``"auto"`` made a model fitted once on
+    the whole capture's ``views`` (a block may hold too few smooth samples for a fit of its
+    own); ``"auto"`` becomes ``"differences"`` where the views do not follow the model
+    (refused, or ``NoiseFit.holds`` false: no measurable noise). Left as it is where
+    ``"poisson-gaussian"``'s fit is refused (each solve then tries its own, or warns), where the
+    noise is given, and where a ``noise_model`` weighs the samples (its own σ is used then)."""
     from dataclasses import replace
 
-    if (hqs_opts.noise_estimate != "poisson-gaussian" or hqs_opts.noise is not None
+    if (hqs_opts.noise_estimate not in ("poisson-gaussian", "auto") or hqs_opts.noise is not None
             or hqs_opts.noise_model is not None or views is None):
         return hqs_opts  # a given noise, or weights whose own σ the solver uses
+    if hqs_opts.noise_estimate == "auto":
+        from metasensor.solvers.hqs import quiet_fit
+
+        fit = quiet_fit(views)
+        return replace(hqs_opts, noise_estimate=fit.model if fit is not None and fit.holds()
+                       else "differences")
     from metasensor.solvers.noise_fit import fit_poisson_gaussian
 
     try:

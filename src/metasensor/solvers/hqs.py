@@ -21,9 +21,12 @@ data and the operator's sensitivity) and the prior sees it so. Unless given, λ 
 measured as ``noise_estimate`` says: :func:`estimate_noise` or the r.m.s. of the views' fitted
 Poisson–Gaussian model, :mod:`metasensor.solvers.noise_fit`) and the r.m.s.
 misfit of a nearly unregularised fit (the model error: PSF banks that do not match the data
-must not get the weight of the noise); ``e`` (``scan_exponent``, default 2) scales the data's
-weight with the scan step ``d`` (px) from that of the 5 x 5 scan (e = 2 keeps the data's weight
-per image pixel, V / d² samples, constant). The start is
+must not get the weight of the noise); ``e`` (``scan_exponent``) scales the data's weight with
+the scan step ``d`` (px) from that of the 5 x 5 scan (e = 2 keeps the data's weight per image
+pixel, V / d² samples, constant). By default e and the misfit gate below follow the noise
+measurement (``ESTIMATE_SETTINGS`` of :mod:`metasensor.solvers.hqs_options`): 2 and 1.1 with
+the second differences, which texture and coarse samples raise and which these were chosen
+with; 0.5 and 0.95 with a Poisson–Gaussian σ, which reads the noise alone. The start is
 the smoothness-regularised least-squares fit (weight ``init_reg``; the prior is not convex, so
 the start decides where it ends). The result is clipped at zero. Why each default is what it
 is: ``docs/decisions.md``.
@@ -36,9 +39,9 @@ preconditioned by the circular unweighted solve.
 
 Model error (a bank that is an estimate, a wavefront or scene that moves during the scan) sits
 where the scene has structure, not everywhere as noise does: where the nearly unregularised
-fit's r.m.s. misfit exceeds ``misfit_weights`` times the noise, the data term is weighted by
-each sample position's own misfit in that fit, averaged over ``misfit_pool`` × ``misfit_pool``
-positions and floored at the fit's r.m.s. misfit
+fit's r.m.s. misfit exceeds ``misfit_weights`` (the gate) times the noise, the data term is
+weighted by each sample position's own misfit in that fit, averaged over ``misfit_pool`` ×
+``misfit_pool`` positions and floored at the fit's r.m.s. misfit
 (:func:`metasensor.solvers.noise_model.misfit_weights`), as above: positions the model misses
 get less than the global weight, none more (that fit absorbs part of the model error, so a
 position's own misfit under-states it).
@@ -103,21 +106,43 @@ def estimate_noise(data: torch.Tensor, mask: torch.Tensor) -> float:
     return float(sum(out) / len(out)) if out else 0.0
 
 
-def _noise(y: torch.Tensor, m: torch.Tensor, options: HQSOptions) -> float:
-    """The views' noise r.m.s. (data units): ``noise`` where given, else measured as
-    ``noise_estimate`` says; a Poisson–Gaussian fit the views do not support falls back to
-    :func:`estimate_noise` with a warning."""
+def _noise(y: torch.Tensor, m: torch.Tensor, options: HQSOptions) -> tuple[float, str]:
+    """The views' noise r.m.s. (data units) and how it was measured (``"differences"`` or
+    ``"poisson-gaussian"``, the keys of ``ESTIMATE_SETTINGS``): ``noise`` where given (counted
+    as the differences), else as ``noise_estimate`` says; a Poisson–Gaussian fit the views do
+    not support falls back to :func:`estimate_noise`, with a warning for
+    ``"poisson-gaussian"``, quietly for ``"auto"`` (also where the fit's lack of fit is too
+    large: ``NoiseFit.holds``)."""
     if options.noise is not None:
-        return float(options.noise)
+        return float(options.noise), "differences"
     if isinstance(options.noise_estimate, PoissonGaussian):
-        return options.noise_estimate.rms(y, m)
+        return options.noise_estimate.rms(y, m), "poisson-gaussian"
     if options.noise_estimate == "poisson-gaussian":
         try:
-            return fitted_noise_rms(y, m)
+            return fitted_noise_rms(y, m), "poisson-gaussian"
         except ValueError as exc:
             warnings.warn(f"HQS noise: {exc}; using the second-difference estimate instead",
                           UserWarning, stacklevel=3)
-    return estimate_noise(y, m)
+    elif options.noise_estimate == "auto":
+        fit = quiet_fit(y)
+        if fit is not None and fit.holds():
+            return fit.model.rms(y, m), "poisson-gaussian"
+    return estimate_noise(y, m), "differences"
+
+
+def quiet_fit(views):
+    """:func:`~metasensor.solvers.noise_fit.fit_poisson_gaussian` of ``views`` (a tensor or
+    array), or None where the fit is refused; its warnings are not shown (``"auto"`` judges
+    the fit by ``NoiseFit.holds``)."""
+    from metasensor.solvers.noise_fit import fit_poisson_gaussian
+
+    data = views.detach().cpu().numpy() if isinstance(views, torch.Tensor) else views
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)
+        try:
+            return fit_poisson_gaussian(data)
+        except ValueError:
+            return None
 
 
 class FoldedXStep:
@@ -202,21 +227,23 @@ def _noise_weights(op, x, unit: float, m, options: HQSOptions):
 
 
 def _misfit_weights(op, smooth: FoldedXStep, x, aty, y, m, unit: float, options: HQSOptions,
-                    yy: float):
+                    yy: float, noise_kind: tuple[float, str]):
     """Weights of the model's local misfit (module docstring) and their reference σ (data
     units), or (None, the noise σ (data units)) where the nearly unregularised fit (smoothness
     ``MISFIT_REG``) is within ``misfit_weights`` times the noise (that fit is not made where the
     smooth start ``x`` already is: it fits at least as closely); third, that fit where made.
     ``weights`` is ``(My, Mx)``: one per sample position, for every view. (None, None, None)
-    where the weights are off (``misfit_weights`` None or a ``noise_model`` given)."""
-    if options.misfit_weights is None or options.noise_model is not None:
+    where the weights are off (``misfit_weights`` None or a ``noise_model`` given).
+    ``noise_kind``: the noise (data units) and its kind (:func:`_noise`)."""
+    sigma, kind = noise_kind
+    gate = options.data_weight_settings(kind)[1]
+    if gate is None or options.noise_model is not None:
         return None, None, None
     mf = m.to(torch.float32)
     yn = y / unit
-    sigma = _noise(y, m, options)
     noise = sigma / unit
     root_n = math.sqrt(max(float(mf.sum()) * yn.shape[0], 1.0))
-    bound = options.misfit_weights * noise * root_n
+    bound = gate * noise * root_n
     if not (noise > 0 and _residual_norm(op, x, smooth.data_product(x), aty, yn, mf, yy)
             > bound):
         return None, sigma, None
@@ -237,7 +264,7 @@ def _weighted_normal(op, weights: torch.Tensor) -> Callable[[torch.Tensor], torc
 
 def _data_weight(op: PhaseSpaceOperator, smooth: FoldedXStep, aty, y, m, unit: float,
                  options: HQSOptions, weights=None, sigma=None, start=None, yy=None,
-                 fit=None) -> float:
+                 fit=None, kind: str | None = None) -> float:
     """λ (module docstring): lam_scale / σ² · (d / 3)^e, σ = max(noise, model misfit); with
     ``weights``, the misfit is weighted and σ is the weights' reference σ.
 
@@ -245,13 +272,16 @@ def _data_weight(op: PhaseSpaceOperator, smooth: FoldedXStep, aty, y, m, unit: f
     weight fits the data at least as closely (the residual of a Tikhonov fit grows with its
     weight), so where the smooth ``start`` (weight ``init_reg``, its ``AᵀMA x`` carried by
     ``smooth``) already fits within the noise, that fit cannot raise σ and is not made.
-    ``yy``: ``‖y / unit‖²`` when known; ``fit``: that fit when made already."""
+    ``yy``: ``‖y / unit‖²`` when known; ``fit``: that fit when made already; ``kind``: how
+    ``sigma`` was measured (:func:`_noise`; it sets e), measured here with it where either is
+    None."""
     if options.lam is not None:
         return float(options.lam)
     mf = m.to(torch.float32)
     yn = y / unit
-    if sigma is None:
-        sigma = _noise(y, m, options)
+    if sigma is None or kind is None:
+        measured, kind = _noise(y, m, options)
+        sigma = measured if sigma is None else sigma
     n_obs = max(float(mf.sum()) * yn.shape[0], 1.0)
     misfit = 0.0
     if (fit is not None or weights is not None or start is None or _residual_norm(
@@ -265,7 +295,8 @@ def _data_weight(op: PhaseSpaceOperator, smooth: FoldedXStep, aty, y, m, unit: f
             resid = float(torch.linalg.vector_norm((op.forward(fit) - yn) * weights.sqrt()))
         misfit = resid / math.sqrt(n_obs)
     sigma_n = max(sigma / unit, misfit, 1e-6 * float(yn[:, m].abs().mean()))
-    lam = options.lam_scale / sigma_n**2 * (op.geometry.d / REF_STEP) ** options.scan_exponent
+    e = options.data_weight_settings(kind)[0]
+    lam = options.lam_scale / sigma_n**2 * (op.geometry.d / REF_STEP) ** e
     if not (lam > 0 and math.isfinite(lam)):
         raise ValueError(f"lam must be positive and finite, got {lam!r}")
     return lam
@@ -314,9 +345,13 @@ def hqs(op: PhaseSpaceOperator, y, mask, options: HQSOptions = HQSOptions(), *,
     x = smooth.at(options.init_reg * smooth.scale)(aty, None)  # the smooth start
     yy = float(torch.sum(yn.double() ** 2))
     weights, sigma = _noise_weights(op, x, unit, m, options)
-    fit = None
+    fit, kind = None, "differences"
     if weights is None and sigma is None:
-        weights, sigma, fit = _misfit_weights(op, smooth, x, aty, y, m, unit, options, yy)
+        noise_kind = _noise(y, m, options)
+        kind = noise_kind[1]
+        weights, sigma, fit = _misfit_weights(op, smooth, x, aty, y, m, unit, options, yy,
+                                              noise_kind)
+        sigma = noise_kind[0] if sigma is None and weights is None and fit is None else sigma
     loop_aty = aty
     if weights is None:
         xstep = FoldedXStep(nm, data_normal, m, options.prior.transform, REG_FLOOR, options.cg,
@@ -327,7 +362,7 @@ def hqs(op: PhaseSpaceOperator, y, mask, options: HQSOptions = HQSOptions(), *,
                             REG_FLOOR, options.cg, exact=False, tol=options.cg_tol)
         loop_aty = op.adjoint(yn * weights)
     lam = _data_weight(op, smooth, aty, y, m, unit, options, weights, sigma, start=x, yy=yy,
-                       fit=fit)
+                       fit=fit, kind=kind)
     norm_y = max(float(torch.linalg.vector_norm(yn)), 1e-30)
     history: list[float] = []
 

@@ -11,9 +11,15 @@ from metasensor.solvers.noise_model import PoissonGaussian
 from metasensor.solvers.priors import HyperLaplacian, Prior
 from metasensor.solvers.splitting import Continuation
 
-__all__ = ["HQSOptions", "NOISE_ESTIMATES"]
+__all__ = ["HQSOptions", "NOISE_ESTIMATES", "ESTIMATE_SETTINGS"]
 
-NOISE_ESTIMATES = ("differences", "poisson-gaussian")
+NOISE_ESTIMATES = ("differences", "poisson-gaussian", "auto")
+#: per kind of noise measurement, the data weight's (scan exponent e, misfit gate) where
+#: ``scan_exponent`` / ``misfit_weights`` are ``"auto"``: the second differences read texture
+#: and coarse samples as noise, and e = 2 and the gate 1.1 were chosen with that bias; a
+#: Poisson–Gaussian σ (fitted, or a model given) reads the noise alone (docs/decisions.md). A
+#: given ``noise`` keeps the first pair.
+ESTIMATE_SETTINGS = {"differences": (2.0, 1.1), "poisson-gaussian": (0.5, 0.95)}
 
 
 @dataclass(frozen=True)
@@ -32,18 +38,23 @@ class HQSOptions:
         λ·σ² when λ is derived (default 0.3).
     noise : float or None
         The views' noise r.m.s. in data units; None: measured as ``noise_estimate`` says.
-    noise_estimate : {"differences", "poisson-gaussian"} or PoissonGaussian
+    noise_estimate : {"differences", "poisson-gaussian", "auto"} or PoissonGaussian
         How the noise is measured where ``noise`` is None: ``"differences"`` (default), the
         second differences' median absolute deviation
         (:func:`~metasensor.solvers.hqs.estimate_noise`), which texture and coarse samples
         raise; ``"poisson-gaussian"``, the r.m.s. of the Poisson–Gaussian model fitted to the
         solved samples' smooth parts (:func:`~metasensor.solvers.noise_fit.fitted_noise_rms`;
-        where they do not support the fit, the differences, with a warning); a
-        ``PoissonGaussian``: that model's r.m.s. over the solved samples
+        where they do not support the fit, the differences, with a warning); ``"auto"``, that
+        fit where the views follow it (``NoiseFit.holds``: not refused, lack of fit at most
+        ``MAX_LACK_OF_FIT``), else quietly the differences (views without measurable noise);
+        a ``PoissonGaussian``: that model's r.m.s. over the solved samples
         (``PoissonGaussian.rms``; ``reconstruct`` fits it once on the whole capture, as small
-        blocks hold too few smooth samples for a fit of their own).
-    scan_exponent : float
-        ``e`` of λ's scan factor ``(d / 3)^e`` (module docstring), >= 0 (default 2).
+        blocks hold too few smooth samples for a fit of their own, and resolves ``"auto"``
+        there).
+    scan_exponent : float or "auto"
+        ``e`` of λ's scan factor ``(d / 3)^e`` (module docstring), >= 0; ``"auto"`` (default):
+        that of the noise measurement used (``ESTIMATE_SETTINGS``: 2 with the differences or a
+        given ``noise``, 0.5 with a Poisson–Gaussian σ).
     noise_model : PoissonGaussian or None
         The views' Poisson–Gaussian noise (:mod:`metasensor.solvers.noise_model`): the data
         term becomes weighted least squares, each sample weighed by ``1 / var`` of the smooth
@@ -62,11 +73,13 @@ class HQSOptions:
         floor of these products: ``docs/decisions.md``); 0: always ``cg`` iterations.
     init_reg : float
         Smoothness weight of the start, relative to AᵀA's largest diagonal (default 1e-2).
-    misfit_weights : float or None
+    misfit_weights : float, "auto" or None
         Without a ``noise_model``: where the nearly unregularised fit's r.m.s. misfit exceeds
         this many times the noise (the model does not fit the data), weigh each view-sample
-        position by its local misfit (module docstring; default 1.1, ``docs/decisions.md``);
-        None: one global weight always.
+        position by its local misfit (module docstring; ``docs/decisions.md``); ``"auto"``
+        (default): the gate of the noise measurement used (``ESTIMATE_SETTINGS``: 1.1 with the
+        differences or a given ``noise``, 0.95 with a Poisson–Gaussian σ); None: one global
+        weight always.
     misfit_pool : int
         Odd side (view-sample positions) of the box over which that local misfit is averaged
         (default 3), so that the weights do not vary from one view sample to the next.
@@ -77,14 +90,14 @@ class HQSOptions:
     lam_scale: float = 0.3
     noise: float | None = None
     noise_estimate: str | PoissonGaussian = "differences"
-    scan_exponent: float = 2.0
+    scan_exponent: float | str = "auto"
     noise_model: PoissonGaussian | None = None
     continuation: Continuation = Continuation(beta_max=4096.0)
     inner: int = 3
     cg: int = 3
     cg_tol: float = 1e-4
     init_reg: float = 1e-2
-    misfit_weights: float | None = 1.1
+    misfit_weights: float | str | None = "auto"
     misfit_pool: int = 3
 
     def __post_init__(self) -> None:
@@ -98,9 +111,10 @@ class HQSOptions:
             if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
                 raise ValueError(f"{name} must be > 0, got {value!r}")
         mw = self.misfit_weights
-        if mw is not None and (isinstance(mw, bool) or not (
+        if mw is not None and mw != "auto" and (isinstance(mw, bool) or not (
                 isinstance(mw, int | float) and math.isfinite(mw) and mw > 0)):
-            raise ValueError(f"misfit_weights must be a positive number or None, got {mw!r}")
+            raise ValueError(f"misfit_weights must be a positive number, 'auto' or None, got "
+                             f"{mw!r}")
         mp = self.misfit_pool
         if isinstance(mp, bool) or not (isinstance(mp, int) and mp >= 1 and mp % 2 == 1):
             raise ValueError(f"misfit_pool must be an odd positive integer, got {mp!r}")
@@ -113,9 +127,9 @@ class HQSOptions:
             raise ValueError(f"noise_estimate must be one of {NOISE_ESTIMATES}, got "
                              f"{self.noise_estimate!r}")
         e = self.scan_exponent
-        if isinstance(e, bool) or not (isinstance(e, int | float) and math.isfinite(e)
-                                       and e >= 0):
-            raise ValueError(f"scan_exponent must be a finite number >= 0, got {e!r}")
+        if e != "auto" and (isinstance(e, bool) or not (
+                isinstance(e, int | float) and math.isfinite(e) and e >= 0)):
+            raise ValueError(f"scan_exponent must be a finite number >= 0 or 'auto', got {e!r}")
         if self.noise_model is not None and not isinstance(self.noise_model, PoissonGaussian):
             raise TypeError(f"noise_model must be a PoissonGaussian, got "
                             f"{type(self.noise_model).__name__}")
@@ -127,6 +141,14 @@ class HQSOptions:
                     1 if name == "inner" else 0):
                 raise ValueError(f"{name} must be an integer >= {1 if name == 'inner' else 0}, "
                                  f"got {value!r}")
+
+    def data_weight_settings(self, kind: str) -> tuple[float, float | None]:
+        """(scan exponent e, misfit gate or None) for a noise measured as ``kind``
+        (``"differences"`` or ``"poisson-gaussian"``; a given ``noise`` is ``"differences"``):
+        the explicit settings, ``"auto"`` ones from ``ESTIMATE_SETTINGS``."""
+        e, gate = ESTIMATE_SETTINGS[kind]
+        return (e if self.scan_exponent == "auto" else float(self.scan_exponent),
+                gate if self.misfit_weights == "auto" else self.misfit_weights)
 
     @property
     def steps(self) -> int:

@@ -33,10 +33,15 @@ import numpy as np
 
 from metasensor.solvers.noise_model import PoissonGaussian
 
-__all__ = ["NoiseFitOptions", "NoiseFit", "fit_poisson_gaussian", "fitted_noise_rms"]
+__all__ = ["NoiseFitOptions", "NoiseFit", "fit_poisson_gaussian", "fitted_noise_rms",
+           "MAX_LACK_OF_FIT"]
 
 MAD_SIGMA = 1.4826  # σ of a normal distribution per median absolute deviation
 MAD_VAR_EFFICIENCY = 2.72  # variance of a MAD-based σ² estimate over the sample variance's
+#: lack of fit (reduced χ² of the bins) above which the views are taken not to follow the model:
+#: noisy captures read tens to hundreds (coarse scans of sharp charts), noise-free ones
+#: thousands and more (docs/decisions.md)
+MAX_LACK_OF_FIT = 500.0
 
 
 @dataclass(frozen=True)
@@ -96,6 +101,10 @@ class NoiseFit:
         Standard errors of ``a`` and of the unclipped ``b``.
     levels, variances, counts : numpy.ndarray
         The bins' mean level, robust variance (data units, units²) and smooth-sample count.
+    lack_of_fit : float
+        The bins' mean squared distance from the fitted line, in their standard errors (a
+        reduced χ²): near 1 where the smooth samples' variance is noise that follows the model,
+        far above it where it is the scene's own structure (views without measurable noise).
     """
 
     model: PoissonGaussian
@@ -104,6 +113,12 @@ class NoiseFit:
     levels: np.ndarray
     variances: np.ndarray
     counts: np.ndarray
+    lack_of_fit: float = float("nan")
+
+    def holds(self, max_lack_of_fit: float = MAX_LACK_OF_FIT) -> bool:
+        """Whether the views follow the fitted model: ``lack_of_fit`` at most
+        ``max_lack_of_fit`` (default :data:`MAX_LACK_OF_FIT`)."""
+        return bool(self.lack_of_fit <= max_lack_of_fit)
 
 
 def _select(views: np.ndarray, options: NoiseFitOptions) -> np.ndarray:
@@ -235,7 +250,16 @@ def fit_poisson_gaussian(views, options: NoiseFitOptions = NoiseFitOptions()) ->
                       f"{a_err / a:.0%}); the views' levels span too little", UserWarning,
                       stacklevel=2)
     return NoiseFit(PoissonGaussian(a, max(b, 0.0), source="fit"), a_err, b_err, levels,
-                    variances, counts.astype(np.int64))
+                    variances, counts.astype(np.int64), _lack_of_fit(a, b, levels, variances,
+                                                                     counts))
+
+
+def _lack_of_fit(a: float, b: float, levels, variances, counts) -> float:
+    """Reduced χ² of the bins about the line ``a·level + b`` (each bin's standard error that of
+    a MAD-based variance of its count of samples)."""
+    predicted = np.maximum(a * levels + max(b, 0.0), 1e-30)
+    se = predicted * np.sqrt(2.0 * MAD_VAR_EFFICIENCY / counts)
+    return float(np.mean(((predicted - variances) / se) ** 2))
 
 
 def fitted_noise_rms(data, mask=None, options: NoiseFitOptions = NoiseFitOptions()) -> float:
