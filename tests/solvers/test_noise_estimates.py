@@ -196,4 +196,6 @@ def test_auto_fits_noisy_views_and_falls_back_on_views_without_noise(chart_5x5_n
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # quietly
         back = capture_noise(HQSOptions(noise_estimate="auto"), clean)
-    assert back == HQSOptions(noise_estimate="differences")
+    assert back == HQSOptions(noise_estimate="differences", cg_tol=1e-5)  # a precise solve
+    exact = capture_noise(HQSOptions(noise_estimate="auto", cg_tol=0.0), clean)
+    assert exact.cg_tol == 0.0  # a tighter tolerance given is kept

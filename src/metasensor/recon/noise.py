@@ -41,7 +41,8 @@ def capture_noise(hqs_opts, views):
     """HQS's ``noise_estimate`` ``"poisson-gaussian"`` or ``"auto"`` made a model fitted once on
     the whole capture's ``views`` (a block may hold too few smooth samples for a fit of its
     own); ``"auto"`` becomes ``"differences"`` where the views do not follow the model
-    (refused, or ``NoiseFit.holds`` false: no measurable noise). Left as it is where
+    (refused, or ``NoiseFit.holds`` false: no measurable noise), with the x-steps solved to
+    ``NOISELESS_CG_TOL`` (no noise hides a loose solve there). Left as it is where
     ``"poisson-gaussian"``'s fit is refused (each solve then tries its own, or warns), where the
     noise is given, and where a ``noise_model`` weighs the samples (its own σ is used then)."""
     from dataclasses import replace
@@ -51,10 +52,13 @@ def capture_noise(hqs_opts, views):
         return hqs_opts  # a given noise, or weights whose own σ the solver uses
     if hqs_opts.noise_estimate == "auto":
         from metasensor.solvers.hqs import quiet_fit
+        from metasensor.solvers.hqs_options import NOISELESS_CG_TOL
 
         fit = quiet_fit(views)
-        return replace(hqs_opts, noise_estimate=fit.model if fit is not None and fit.holds()
-                       else "differences")
+        if fit is not None and fit.holds():
+            return replace(hqs_opts, noise_estimate=fit.model)
+        return replace(hqs_opts, noise_estimate="differences",
+                       cg_tol=min(hqs_opts.cg_tol, NOISELESS_CG_TOL))
     from metasensor.solvers.noise_fit import fit_poisson_gaussian
 
     try:

@@ -11,7 +11,7 @@ from metasensor.solvers.noise_model import PoissonGaussian
 from metasensor.solvers.priors import HyperLaplacian, Prior
 from metasensor.solvers.splitting import Continuation
 
-__all__ = ["HQSOptions", "NOISE_ESTIMATES", "ESTIMATE_SETTINGS"]
+__all__ = ["HQSOptions", "NOISE_ESTIMATES", "ESTIMATE_SETTINGS", "NOISELESS_CG_TOL"]
 
 NOISE_ESTIMATES = ("differences", "poisson-gaussian", "auto")
 #: per kind of noise measurement, the data weight's (scan exponent e, misfit gate) where
@@ -20,6 +20,10 @@ NOISE_ESTIMATES = ("differences", "poisson-gaussian", "auto")
 #: Poisson–Gaussian σ (fitted, or a model given) reads the noise alone (docs/decisions.md). A
 #: given ``noise`` keeps the first pair.
 ESTIMATE_SETTINGS = {"differences": (2.0, 1.1), "poisson-gaussian": (0.5, 0.95)}
+#: ``cg_tol`` of a capture without measurable noise under ``noise_estimate="auto"`` (at most):
+#: the default tolerance sits at float32's floor of the x-step's products, which noise hides
+#: and noise-free views do not (docs/decisions.md)
+NOISELESS_CG_TOL = 1e-5
 
 
 @dataclass(frozen=True)
@@ -46,7 +50,8 @@ class HQSOptions:
         solved samples' smooth parts (:func:`~metasensor.solvers.noise_fit.fitted_noise_rms`;
         where they do not support the fit, the differences, with a warning); ``"auto"``, that
         fit where the views follow it (``NoiseFit.holds``: not refused, lack of fit at most
-        ``MAX_LACK_OF_FIT``), else quietly the differences (views without measurable noise);
+        ``MAX_LACK_OF_FIT``), else quietly the differences (views without measurable noise;
+        ``reconstruct`` then also solves the x-steps to ``NOISELESS_CG_TOL``);
         a ``PoissonGaussian``: that model's r.m.s. over the solved samples
         (``PoissonGaussian.rms``; ``reconstruct`` fits it once on the whole capture, as small
         blocks hold too few smooth samples for a fit of their own, and resolves ``"auto"``
