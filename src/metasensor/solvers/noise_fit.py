@@ -39,8 +39,8 @@ __all__ = ["NoiseFitOptions", "NoiseFit", "fit_poisson_gaussian", "fitted_noise_
 MAD_SIGMA = 1.4826  # σ of a normal distribution per median absolute deviation
 MAD_VAR_EFFICIENCY = 2.72  # variance of a MAD-based σ² estimate over the sample variance's
 #: lack of fit (reduced χ² of the bins) above which the views are taken not to follow the model:
-#: noisy captures read tens to hundreds (coarse scans of sharp charts), noise-free ones
-#: thousands and more (docs/decisions.md)
+#: noisy captures read well below it, noise-free ones (the variance is the scene's) well above
+#: (the measurements: docs/decisions.md)
 MAX_LACK_OF_FIT = 500.0
 
 
