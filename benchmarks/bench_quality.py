@@ -249,7 +249,7 @@ def run_demo_rows(out: Path) -> list[dict]:
 def _plot(rows: list[dict], path: Path) -> None:
     from metasensor.io.figures import new_figure, save_figure
 
-    fig, axes = new_figure(ncols=2, size=(10, 3.8))
+    fig, axes = new_figure(ncols=2, size=(10, 4.4))
     ax = axes[0, 0]
     free = [r for r in rows if r["study"] == "aberration-free"]
     names = list(dict.fromkeys(r["scene"] for r in free))
@@ -262,7 +262,8 @@ def _plot(rows: list[dict], path: Path) -> None:
                 label=f"{label}: resolved / Nyquist")
     ax.set_xticks(range(len(names)), names, rotation=30, fontsize=7)
     ax.set_title("aberration-free, 30 dB, 5 x 5 scan", fontsize=9)
-    ax.legend(fontsize=6)
+    # below the axes: inside, it hid the low resolved-frequency points
+    ax.legend(fontsize=6, ncol=3, loc="upper center", bbox_to_anchor=(0.5, -0.2))
     ax = axes[0, 1]
     focus = [r for r in rows if r["study"] == "focus" and r["image"].startswith("ISA")]
     for name in dict.fromkeys(r["scene"] for r in focus):

@@ -51,8 +51,8 @@ def capture_noise(hqs_opts, views):
             or hqs_opts.noise_model is not None or views is None):
         return hqs_opts  # a given noise, or weights whose own σ the solver uses
     if hqs_opts.noise_estimate == "auto":
-        from metasensor.solvers.hqs import quiet_fit
         from metasensor.solvers.hqs_options import NOISELESS_CG_TOL
+        from metasensor.solvers.noise_fit import quiet_fit
 
         fit = quiet_fit(views)
         if fit is not None and fit.holds():

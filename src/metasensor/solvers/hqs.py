@@ -59,7 +59,7 @@ from metasensor.phasespace.masked_normal import BandNormal
 from metasensor.phasespace.normal import FoldedNormal
 from metasensor.phasespace.operator import PhaseSpaceOperator
 from metasensor.solvers.hqs_options import HQSOptions
-from metasensor.solvers.noise_fit import fitted_noise_rms
+from metasensor.solvers.noise_fit import fitted_noise_rms, quiet_fit
 from metasensor.solvers.noise_model import PoissonGaussian, misfit_weights, sample_weights
 from metasensor.solvers.pcg import preconditioned_cg
 from metasensor.solvers.priors import GRADIENT, Transform
@@ -129,20 +129,6 @@ def _noise(y: torch.Tensor, m: torch.Tensor, options: HQSOptions) -> tuple[float
             return fit.model.rms(y, m), "poisson-gaussian"
     return estimate_noise(y, m), "differences"
 
-
-def quiet_fit(views):
-    """:func:`~metasensor.solvers.noise_fit.fit_poisson_gaussian` of ``views`` (a tensor or
-    array), or None where the fit is refused; its warnings are not shown (``"auto"`` judges
-    the fit by ``NoiseFit.holds``)."""
-    from metasensor.solvers.noise_fit import fit_poisson_gaussian
-
-    data = views.detach().cpu().numpy() if isinstance(views, torch.Tensor) else views
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", UserWarning)
-        try:
-            return fit_poisson_gaussian(data)
-        except ValueError:
-            return None
 
 
 class FoldedXStep:
@@ -231,14 +217,14 @@ def _misfit_weights(op, smooth: FoldedXStep, x, aty, y, m, unit: float, options:
     """Weights of the model's local misfit (module docstring) and their reference σ (data
     units), or (None, the noise σ (data units)) where the nearly unregularised fit (smoothness
     ``MISFIT_REG``) is within ``misfit_weights`` times the noise (that fit is not made where the
-    smooth start ``x`` already is: it fits at least as closely); third, that fit where made.
-    ``weights`` is ``(My, Mx)``: one per sample position, for every view. (None, None, None)
-    where the weights are off (``misfit_weights`` None or a ``noise_model`` given).
-    ``noise_kind``: the noise (data units) and its kind (:func:`_noise`)."""
+    smooth start ``x`` already is: it fits at least as closely, or where the weights are off:
+    ``misfit_weights`` None); third, that fit where made. ``weights`` is ``(My, Mx)``: one per
+    sample position, for every view. ``noise_kind``: the noise (data units) and its kind
+    (:func:`_noise`)."""
     sigma, kind = noise_kind
     gate = options.data_weight_settings(kind)[1]
-    if gate is None or options.noise_model is not None:
-        return None, None, None
+    if gate is None:
+        return None, sigma, None
     mf = m.to(torch.float32)
     yn = y / unit
     noise = sigma / unit
@@ -351,7 +337,6 @@ def hqs(op: PhaseSpaceOperator, y, mask, options: HQSOptions = HQSOptions(), *,
         kind = noise_kind[1]
         weights, sigma, fit = _misfit_weights(op, smooth, x, aty, y, m, unit, options, yy,
                                               noise_kind)
-        sigma = noise_kind[0] if sigma is None and weights is None and fit is None else sigma
     loop_aty = aty
     if weights is None:
         xstep = FoldedXStep(nm, data_normal, m, options.prior.transform, REG_FLOOR, options.cg,

@@ -34,7 +34,7 @@ import numpy as np
 from metasensor.solvers.noise_model import PoissonGaussian
 
 __all__ = ["NoiseFitOptions", "NoiseFit", "fit_poisson_gaussian", "fitted_noise_rms",
-           "MAX_LACK_OF_FIT"]
+           "quiet_fit", "MAX_LACK_OF_FIT"]
 
 MAD_SIGMA = 1.4826  # σ of a normal distribution per median absolute deviation
 MAD_VAR_EFFICIENCY = 2.72  # variance of a MAD-based σ² estimate over the sample variance's
@@ -260,6 +260,20 @@ def _lack_of_fit(a: float, b: float, levels, variances, counts) -> float:
     predicted = np.maximum(a * levels + max(b, 0.0), 1e-30)
     se = predicted * np.sqrt(2.0 * MAD_VAR_EFFICIENCY / counts)
     return float(np.mean(((predicted - variances) / se) ** 2))
+
+
+def quiet_fit(views) -> NoiseFit | None:
+    """:func:`fit_poisson_gaussian` of ``views`` (a tensor or array, default options), or None
+    where the fit is refused; its warnings are not shown (the caller judges the fit, e.g. by
+    :meth:`NoiseFit.holds`)."""
+    if hasattr(views, "detach"):
+        views = views.detach().cpu().numpy()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)
+        try:
+            return fit_poisson_gaussian(views)
+        except ValueError:
+            return None
 
 
 def fitted_noise_rms(data, mask=None, options: NoiseFitOptions = NoiseFitOptions()) -> float:
