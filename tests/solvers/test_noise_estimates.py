@@ -121,12 +121,14 @@ def test_reconstruct_fits_the_model_once_on_the_whole_capture(monkeypatch):
     opts = capture_noise(HQSOptions(noise_estimate="poisson-gaussian"), cap.views)
     assert isinstance(opts.noise_estimate, PoissonGaussian) and opts.noise_estimate.a > 0
     assert calls == [cap.views.shape]
-    assert capture_noise(HQSOptions(), cap.views) == HQSOptions()  # the default: untouched
+    # the default: fitted only to find whether the views carry noise; these do, so untouched
+    assert capture_noise(HQSOptions(), cap.views) == HQSOptions()
+    assert calls == [cap.views.shape] * 2
     given = HQSOptions(noise_estimate="poisson-gaussian", noise=1.0)
     assert capture_noise(given, cap.views) is given
     weighted = HQSOptions(noise_estimate="poisson-gaussian", noise_model=PoissonGaussian(1, 1))
     assert capture_noise(weighted, cap.views) is weighted
-    assert calls == [cap.views.shape]  # neither of the last two fitted
+    assert calls == [cap.views.shape] * 2  # neither of the last two fitted
 
 
 def test_reconstruct_hands_every_block_the_capture_model(monkeypatch):
@@ -199,3 +201,8 @@ def test_auto_fits_noisy_views_and_falls_back_on_views_without_noise(chart_5x5_n
     assert back == HQSOptions(noise_estimate="differences", cg_tol=1e-5)  # a precise solve
     exact = capture_noise(HQSOptions(noise_estimate="auto", cg_tol=0.0), clean)
     assert exact.cg_tol == 0.0  # a tighter tolerance given is kept
+    # the default (second differences) solves views without measurable noise as precisely
+    assert capture_noise(HQSOptions(), noisy) == HQSOptions()
+    assert capture_noise(HQSOptions(), clean) == HQSOptions(cg_tol=1e-5)
+    given = HQSOptions(noise=1.0)
+    assert capture_noise(given, clean) is given

@@ -206,8 +206,8 @@ def _block_grid(blocks) -> tuple[int, int]:
 def _solver_options(opts: ReconOptions, solver: str, n_views: int, step: int, noise=None,
                     views=None):
     """The resolved solver settings (RLOptions or HQSOptions) and RL's subsets; ``noise`` the
-    Poisson–Gaussian model (None: one global weight); ``views`` the capture (for HQS's
-    ``noise_estimate="poisson-gaussian"``, fitted here once)."""
+    Poisson–Gaussian model (None: one global weight); ``views`` the capture (HQS's noise,
+    measured here once: :func:`metasensor.recon.noise.capture_noise`)."""
     from dataclasses import replace
 
     from metasensor.solvers.hqs import HQSOptions

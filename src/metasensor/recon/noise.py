@@ -1,6 +1,7 @@
 """The noise the solvers' data term is weighed by, decided once per capture: the
-Poisson–Gaussian model :class:`~metasensor.recon.options.ReconOptions` asks for, and the model
-behind HQS's ``noise_estimate="poisson-gaussian"``; both fitted on the whole capture
+Poisson–Gaussian model :class:`~metasensor.recon.options.ReconOptions` asks for, the model
+behind HQS's ``noise_estimate="poisson-gaussian"`` or ``"auto"``, and whether the views carry
+measurable noise at all (HQS's x-step tolerance); all fitted on the whole capture
 (:func:`metasensor.solvers.noise_fit.fit_poisson_gaussian`), as one block may hold too few
 smooth samples for a fit of its own."""
 
@@ -38,30 +39,35 @@ def noise_model(views, opts: ReconOptions, solver: str):
 
 
 def capture_noise(hqs_opts, views):
-    """HQS's ``noise_estimate`` ``"poisson-gaussian"`` or ``"auto"`` made a model fitted once on
-    the whole capture's ``views`` (a block may hold too few smooth samples for a fit of its
-    own); ``"auto"`` becomes ``"differences"`` where the views do not follow the model
-    (refused, or ``NoiseFit.holds`` false: no measurable noise), with the x-steps solved to
-    ``NOISELESS_CG_TOL`` (no noise hides a loose solve there). Left as it is where
-    ``"poisson-gaussian"``'s fit is refused (each solve then tries its own, or warns), where the
-    noise is given, and where a ``noise_model`` weighs the samples (its own σ is used then)."""
+    """HQS's settings for this capture's ``views``, decided once on the whole capture (a block
+    may hold too few smooth samples for a fit of its own).
+
+    ``noise_estimate`` ``"poisson-gaussian"`` or ``"auto"`` becomes the model fitted here
+    (:func:`~metasensor.solvers.noise_fit.fit_poisson_gaussian`); ``"auto"`` becomes
+    ``"differences"`` where the views do not follow the model (refused, or ``NoiseFit.holds``
+    false: no measurable noise). Wherever the noise is measured from the views (no ``noise``
+    and no ``noise_model`` given) and they carry none measurable, the x-steps are
+    solved to ``NOISELESS_CG_TOL`` (no noise hides a loose solve there; a tighter ``cg_tol``
+    given is kept). Left as it is where ``"poisson-gaussian"``'s fit is refused (each solve
+    then tries its own, or warns), where the noise is given, and where a ``noise_model`` weighs
+    the samples (its own σ is used then)."""
     from dataclasses import replace
 
-    if (hqs_opts.noise_estimate not in ("poisson-gaussian", "auto") or hqs_opts.noise is not None
+    from metasensor.solvers.hqs_options import NOISELESS_CG_TOL
+    from metasensor.solvers.noise_fit import fit_poisson_gaussian, quiet_fit
+
+    if (not isinstance(hqs_opts.noise_estimate, str) or hqs_opts.noise is not None
             or hqs_opts.noise_model is not None or views is None):
-        return hqs_opts  # a given noise, or weights whose own σ the solver uses
-    if hqs_opts.noise_estimate == "auto":
-        from metasensor.solvers.hqs_options import NOISELESS_CG_TOL
-        from metasensor.solvers.noise_fit import quiet_fit
-
-        fit = quiet_fit(views)
-        if fit is not None and fit.holds():
+        return hqs_opts  # a given noise or model, or weights whose own σ the solver uses
+    if hqs_opts.noise_estimate == "poisson-gaussian":
+        try:
+            return replace(hqs_opts, noise_estimate=fit_poisson_gaussian(views).model)
+        except ValueError:
+            return hqs_opts
+    fit = quiet_fit(views)
+    if fit is not None and fit.holds():
+        if hqs_opts.noise_estimate == "auto":
             return replace(hqs_opts, noise_estimate=fit.model)
-        return replace(hqs_opts, noise_estimate="differences",
-                       cg_tol=min(hqs_opts.cg_tol, NOISELESS_CG_TOL))
-    from metasensor.solvers.noise_fit import fit_poisson_gaussian
-
-    try:
-        return replace(hqs_opts, noise_estimate=fit_poisson_gaussian(views).model)
-    except ValueError:
         return hqs_opts
+    return replace(hqs_opts, noise_estimate="differences",
+                   cg_tol=min(hqs_opts.cg_tol, NOISELESS_CG_TOL))

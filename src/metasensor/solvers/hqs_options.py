@@ -20,7 +20,8 @@ NOISE_ESTIMATES = ("differences", "poisson-gaussian", "auto")
 #: Poisson–Gaussian σ (fitted, or a model given) reads the noise alone (docs/decisions.md). A
 #: given ``noise`` keeps the first pair.
 ESTIMATE_SETTINGS = {"differences": (2.0, 1.1), "poisson-gaussian": (0.5, 0.95)}
-#: ``cg_tol`` of a capture without measurable noise under ``noise_estimate="auto"`` (at most):
+#: ``cg_tol`` of a capture without measurable noise (at most; where the noise is measured from
+#: the views, :func:`metasensor.recon.noise.capture_noise`):
 #: the default tolerance sits at float32's floor of the x-step's products, which noise hides
 #: and noise-free views do not (docs/decisions.md)
 NOISELESS_CG_TOL = 1e-5
@@ -75,7 +76,8 @@ class HQSOptions:
     cg_tol : float
         A masked x-step's conjugate gradients stop once the residual of its system is below
         ``cg_tol`` times its right-hand side (2-norms; default 1e-4, just above the float32
-        floor of these products: ``docs/decisions.md``); 0: always ``cg`` iterations.
+        floor of these products: ``docs/decisions.md``; ``NOISELESS_CG_TOL`` at most where
+        ``reconstruct`` finds no measurable noise in the views); 0: always ``cg`` iterations.
     init_reg : float
         Smoothness weight of the start, relative to AᵀA's largest diagonal (default 1e-2).
     misfit_weights : float, "auto" or None
