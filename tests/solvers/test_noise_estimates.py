@@ -201,8 +201,17 @@ def test_auto_fits_noisy_views_and_falls_back_on_views_without_noise(chart_5x5_n
     assert back == HQSOptions(noise_estimate="differences", cg_tol=1e-5)  # a precise solve
     exact = capture_noise(HQSOptions(noise_estimate="auto", cg_tol=0.0), clean)
     assert exact.cg_tol == 0.0  # a tighter tolerance given is kept
-    # the default (second differences) solves views without measurable noise as precisely
+
+
+def test_the_default_solves_views_without_noise_precisely(chart_5x5_noisy_and_clean):
+    # the second differences stay the noise measure; only the x-steps' tolerance follows the fit
+    from metasensor.recon.noise import capture_noise
+
+    noisy, clean = chart_5x5_noisy_and_clean
     assert capture_noise(HQSOptions(), noisy) == HQSOptions()
-    assert capture_noise(HQSOptions(), clean) == HQSOptions(cg_tol=1e-5)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # quietly
+        assert capture_noise(HQSOptions(), clean) == HQSOptions(cg_tol=1e-5)
+    assert capture_noise(HQSOptions(cg_tol=0.0), clean).cg_tol == 0.0
     given = HQSOptions(noise=1.0)
-    assert capture_noise(given, clean) is given
+    assert capture_noise(given, clean) is given  # a given noise: nothing measured

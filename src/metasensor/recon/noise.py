@@ -45,12 +45,11 @@ def capture_noise(hqs_opts, views):
     ``noise_estimate`` ``"poisson-gaussian"`` or ``"auto"`` becomes the model fitted here
     (:func:`~metasensor.solvers.noise_fit.fit_poisson_gaussian`); ``"auto"`` becomes
     ``"differences"`` where the views do not follow the model (refused, or ``NoiseFit.holds``
-    false: no measurable noise). Wherever the noise is measured from the views (no ``noise``
-    and no ``noise_model`` given) and they carry none measurable, the x-steps are
-    solved to ``NOISELESS_CG_TOL`` (no noise hides a loose solve there; a tighter ``cg_tol``
-    given is kept). Left as it is where ``"poisson-gaussian"``'s fit is refused (each solve
-    then tries its own, or warns), where the noise is given, and where a ``noise_model`` weighs
-    the samples (its own σ is used then)."""
+    false: no measurable noise). Under every ``noise_estimate``, views that carry no measurable
+    noise get their x-steps solved to ``NOISELESS_CG_TOL`` (no noise hides a loose solve there;
+    a tighter ``cg_tol`` given is kept). Left as it is where ``"poisson-gaussian"``'s fit is
+    refused (each solve then tries its own, or warns), where the noise is given, and where a
+    ``noise_model`` weighs the samples (its own σ is used then)."""
     from dataclasses import replace
 
     from metasensor.solvers.hqs_options import NOISELESS_CG_TOL
