@@ -111,16 +111,18 @@ def _du(path: Path) -> int:
     return sum(f.stat().st_size for f in path.rglob("*") if f.is_file())
 
 
-def tiled_capture(cfg):
-    """The astronaut tiled 3 x 3, simulated at 30 dB and noise-free; returns the noisy capture,
-    the clean views, the noise's (gain, variance floor) fitted against the clean views (DN², the
-    floor at least the quantisation's 1/12) and the noise's r.m.s. (DN)."""
+def tiled_capture(cfg, zernike=None):
+    """The astronaut tiled 3 x 3, simulated at 30 dB and noise-free (through the lens
+    aberration ``zernike``, Noll vector in waves r.m.s., where given: the same over the field);
+    returns the noisy capture, the clean views, the noise's (gain, variance floor) fitted
+    against the clean views (DN², the floor at least the quantisation's 1/12) and the noise's
+    r.m.s. (DN)."""
     import metasensor as ms
     from metasensor.simulation.scenes import load_scene
 
     scene = np.tile(load_scene("astronaut", TILE_PX), (3, 3))
-    cap = ms.simulate(scene, cfg, snr_db=30.0, seed=0, comparison=False)
-    clean = ms.simulate(scene, cfg, seed=0, comparison=False).views
+    cap = ms.simulate(scene, cfg, zernike=zernike, snr_db=30.0, seed=0, comparison=False)
+    clean = ms.simulate(scene, cfg, zernike=zernike, seed=0, comparison=False).views
     resid2 = ((cap.views - clean) ** 2).ravel()
     var = np.linalg.lstsq(np.stack([clean.ravel(), np.ones(clean.size)], 1), resid2,
                           rcond=None)[0]

@@ -16,7 +16,11 @@ seconds, whether DAO's estimate was applied, the SSIM of its region without 30 p
 borders against the tiled truth), then the projection (CPU and wall seconds for all blocks one
 after another, as ``--workers 1``; the peak resident memory of this process while the blocks
 ran; the 1-min load average before and after). torch's threads: ``--threads`` (default torch's
-own). Usage: ``python benchmarks/bench_stream_sample.py [--blocks N] [--threads T] [--quick]``,
+own). ``--aberration RMS``: the store's content seen through a lens aberration of RMS waves
+r.m.s. (a falling spectrum over Noll 4–45, seed 0, ``bench_quality.falling_zernike``; the same
+over the field), so that the probe finds it and every block runs wave DAO before HQS: the cost
+of the whole sensor's aberrated reconstruction, projected. Usage: ``python
+benchmarks/bench_stream_sample.py [--blocks N] [--threads T] [--aberration RMS] [--quick]``,
 ``python benchmarks/bench_stream.py --blocks-sample N``, or ``run_all.py [--quick]
 stream_sample`` (N = 3; quick: the quick stream's 2 x 2 blocks, N = 1). Measured figures:
 ``docs/decisions.md``.
@@ -98,7 +102,19 @@ class _Peak:
         self._thread.join()
 
 
-def _block_row(block, window, cfg, truth, d: int) -> dict:
+def _residual_waves(rec, zernike) -> float | None:
+    """r.m.s. (waves) of DAO's estimate minus the true aberration over Noll 4 on (piston and
+    tilts only move the image); None without DAO or aberration."""
+    if zernike is None or rec.dao_zernike is None:
+        return None
+    est = np.asarray(rec.dao_zernike[0, 0], np.float64)
+    n = max(est.size, zernike.size)
+    a, b = np.zeros(n), np.zeros(n)
+    a[:est.size], b[:zernike.size] = est, zernike
+    return float(np.linalg.norm((a - b)[3:]))
+
+
+def _block_row(block, window, cfg, truth, d: int, zernike=None) -> dict:
     import metasensor as ms
     from metasensor.metrics import ssim
 
@@ -116,11 +132,11 @@ def _block_row(block, window, cfg, truth, d: int) -> dict:
                    data_range=float(truth.max() - truth.min()))
     return {"block": str(block.index), "window_samples": f"{h // d}x{w // d}", "cpu_s": cpu,
             "wall_s": wall, "dao": rec.method, "dao_applied": bool(rec.dao_applied[0][0]),
-            "ssim_region": quality}
+            "ssim_region": quality, "dao_residual_waves": _residual_waves(rec, zernike)}
 
 
-def run(quick: bool = False, blocks: int | None = None, threads: int | None = None
-        ) -> list[dict]:
+def run(quick: bool = False, blocks: int | None = None, threads: int | None = None,
+        aberration: float = 0.0) -> list[dict]:
     import torch
 
     import bench_stream as bs
@@ -133,7 +149,12 @@ def run(quick: bool = False, blocks: int | None = None, threads: int | None = No
     n_sample = blocks if blocks is not None else (1 if quick else 3)
     cfg = ms.SystemConfig()
     d = cfg.scan_step_px
-    cap, clean, var, _ = bs.tiled_capture(cfg)
+    zernike = None
+    if aberration:
+        from bench_quality import falling_zernike
+
+        zernike = falling_zernike(float(aberration), seed=0)
+    cap, clean, var, _ = bs.tiled_capture(cfg, zernike)
     t = bs.TILE_PX // d
     truth = cap.truth[bs.TILE_PX:2 * bs.TILE_PX, bs.TILE_PX:2 * bs.TILE_PX]
     clean = clean[:, :, t:2 * t, t:2 * t]
@@ -152,8 +173,9 @@ def run(quick: bool = False, blocks: int | None = None, threads: int | None = No
     rows = []
     with _Peak() as peak:
         for block, window in zip(sampled, windows, strict=True):
-            rows.append(_block_row(block, window, cfg, truth, d))
+            rows.append(_block_row(block, window, cfg, truth, d, zernike))
     rows.append(_projection(rows, groups, sampled, d, peak.peak, load0, case, grid, used))
+    rows[-1]["aberration_rms_waves"] = float(aberration)
     return rows
 
 
@@ -188,16 +210,23 @@ def main(argv: list[str]) -> int:
     parser.add_argument("--blocks", type=int, default=None, help="blocks to reconstruct")
     parser.add_argument("--threads", type=int, default=None, help="torch threads")
     parser.add_argument("--quick", action="store_true", help="the quick stream's blocks")
+    parser.add_argument("--aberration", type=float, default=0.0,
+                        help="lens aberration [waves r.m.s.] of the store's content")
     parser.add_argument("--out", default=None, help="JSON file (default results/...)")
     args = parser.parse_args(argv)
     from metasensor.io.atomic import atomic_write_text
     from run_all import machine
 
     t0 = time.perf_counter()
-    rows = run(quick=args.quick, blocks=args.blocks, threads=args.threads)
+    if not (args.aberration >= 0.0 and np.isfinite(args.aberration)):
+        parser.error(f"--aberration must be a finite number >= 0, got {args.aberration}")
+    rows = run(quick=args.quick, blocks=args.blocks, threads=args.threads,
+               aberration=args.aberration)
     for r in rows:
         print(r)
     name = "stream_sample_quick.json" if args.quick else "stream_sample.json"
+    if args.aberration:
+        name = name.replace(".json", "_aberrated.json")
     out = Path(args.out) if args.out else HERE / "results" / name
     payload = {"benchmark": "stream_sample", "quick": args.quick, "machine": machine(),
                "seconds_total": time.perf_counter() - t0, "rows": rows}
