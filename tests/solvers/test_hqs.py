@@ -323,3 +323,14 @@ def test_misfit_weights_only_where_the_model_does_not_fit(bank, monkeypatch):
     for bad in (0, 2, True, 3.0):
         with pytest.raises(ValueError, match="misfit_pool"):
             HQSOptions(misfit_pool=bad)
+
+
+def test_progress_says_when_the_set_up_is_done_then_ticks_once_per_beta(bank):
+    # 0 once, before the first β (a caller's set-up gate opens there), then 1 after each β
+    g, op, _, _, y, _ = _problem(bank, True)
+    mask = torch.zeros(g.grid, dtype=torch.bool)
+    mask[g.sample_slices()] = True
+    calls = []
+    betas = Continuation(beta0=1.0, beta_max=16.0, beta_rate=4.0)
+    res = hqs(op, y * mask, mask, HQSOptions(continuation=betas), progress=calls.append)
+    assert calls == [0] + [1] * len(betas.betas()) == [0] + [1] * len(res.history)

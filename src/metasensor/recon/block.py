@@ -64,7 +64,8 @@ class BlockTask:
         show two depth layers is solved with one bank per layer; None: one bank.
     setup_gate : threading.Semaphore or None
         Local runs of several blocks at once: held from the block's start to its solver's
-        first step, so that no two blocks build their spectra at once (their peaks add up);
+        first progress call (HQS: its set-up done), so that no two blocks build their spectra
+        at once (their peaks add up);
         lifted while DAO estimates the wavefront on a sub-window of at most
         ``DAO_UNGATED_SAMPLES`` view samples, so that one block's DAO does not idle the others
         (a larger DAO window holds it: DAO's memory grows with its window).
@@ -280,7 +281,8 @@ def _gate_lifted(gate):
 
 
 class _Release:
-    """Releases ``gate`` once (at the solver's first step, or when the block ends)."""
+    """Releases ``gate`` once (at the solver's first progress call: HQS's set-up done,
+    Richardson–Lucy's first iteration; or when the block ends)."""
 
     def __init__(self, gate) -> None:
         self.gate = gate

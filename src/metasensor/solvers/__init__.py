@@ -27,7 +27,7 @@ def solve(op, y, mask, options, progress=None):
         Richardson–Lucy (:class:`~metasensor.solvers.richardson_lucy.RLOptions`) or
         half-quadratic splitting with a prior (:class:`~metasensor.solvers.hqs.HQSOptions`).
     progress : callable, optional
-        Called with 1 per iteration (RL) or per β (HQS).
+        Called with 1 per iteration (RL) or per β (HQS; with 0 first, once its set-up is done).
 
     Returns
     -------

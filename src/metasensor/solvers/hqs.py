@@ -304,7 +304,7 @@ def hqs(op: PhaseSpaceOperator, y, mask, options: HQSOptions = HQSOptions(), *,
     options : HQSOptions
         Prior, λ and the loop's settings.
     progress : callable, optional
-        Called with 1 after each β.
+        Called with 0 once the set-up is done (before the first β), then with 1 after each β.
 
     Returns
     -------
@@ -357,6 +357,8 @@ def hqs(op: PhaseSpaceOperator, y, mask, options: HQSOptions = HQSOptions(), *,
         if progress is not None:
             progress(1)
 
+    if progress is not None:
+        progress(0)  # the set-up is done: what a caller gates on the set-up may go on
     x = half_quadratic_splitting(x, loop_aty, xstep, options.prior, lam,
                                  options.continuation.betas(), options.inner, on_beta)
     return SolveResult(torch.clamp(x, min=0.0) * unit, history)
