@@ -103,15 +103,17 @@ class _Peak:
 
 
 def _residual_waves(rec, zernike) -> float | None:
-    """r.m.s. (waves) of DAO's estimate minus the true aberration over Noll 4 on (piston and
-    tilts only move the image); None without DAO or aberration."""
+    """r.m.s. (waves) of DAO's estimate minus the true aberration over DAO's modes (Noll 4–45:
+    piston and tilts only move the image); None without DAO or aberration."""
+    from metasensor.dao.wavefront import zernike_rms
+
     if zernike is None or rec.dao_zernike is None:
         return None
     est = np.asarray(rec.dao_zernike[0, 0], np.float64)
     n = max(est.size, zernike.size)
     a, b = np.zeros(n), np.zeros(n)
     a[:est.size], b[:zernike.size] = est, zernike
-    return float(np.linalg.norm((a - b)[3:]))
+    return zernike_rms(a - b)
 
 
 def _block_row(block, window, cfg, truth, d: int, zernike=None) -> dict:

@@ -215,3 +215,11 @@ def test_the_default_solves_views_without_noise_precisely(chart_5x5_noisy_and_cl
     assert capture_noise(HQSOptions(cg_tol=0.0), clean).cg_tol == 0.0
     given = HQSOptions(noise=1.0)
     assert capture_noise(given, clean) is given  # a given noise: nothing measured
+    # and so does "poisson-gaussian" (its model kept: it asked for one)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)
+        pg_clean = capture_noise(HQSOptions(noise_estimate="poisson-gaussian"), clean)
+    pg_noisy = capture_noise(HQSOptions(noise_estimate="poisson-gaussian"), noisy)
+    assert isinstance(pg_clean.noise_estimate, PoissonGaussian) and pg_clean.cg_tol == 1e-5
+    assert isinstance(pg_noisy.noise_estimate, PoissonGaussian)
+    assert pg_noisy.cg_tol == HQSOptions().cg_tol

@@ -47,9 +47,9 @@ def capture_noise(hqs_opts, views):
     ``"differences"`` where the views do not follow the model (refused, or ``NoiseFit.holds``
     false: no measurable noise). Under every ``noise_estimate``, views that carry no measurable
     noise get their x-steps solved to ``NOISELESS_CG_TOL`` (no noise hides a loose solve there;
-    a tighter ``cg_tol`` given is kept). Left as it is where ``"poisson-gaussian"``'s fit is
-    refused (each solve then tries its own, or warns), where the noise is given, and where a
-    ``noise_model`` weighs the samples (its own σ is used then)."""
+    a tighter ``cg_tol`` given is kept). ``"poisson-gaussian"`` stays as it is where its fit is
+    refused (each solve then tries its own, or warns). Nothing is measured where the noise is
+    given or a ``noise_model`` weighs the samples (its own σ is used then)."""
     from dataclasses import replace
 
     from metasensor.solvers.hqs_options import NOISELESS_CG_TOL
@@ -58,15 +58,19 @@ def capture_noise(hqs_opts, views):
     if (not isinstance(hqs_opts.noise_estimate, str) or hqs_opts.noise is not None
             or hqs_opts.noise_model is not None or views is None):
         return hqs_opts  # a given noise or model, or weights whose own σ the solver uses
-    if hqs_opts.noise_estimate == "poisson-gaussian":
+    def precise(opts):
+        return replace(opts, cg_tol=min(opts.cg_tol, NOISELESS_CG_TOL))
+
+    if hqs_opts.noise_estimate == "poisson-gaussian":  # its own fit, warnings shown
         try:
-            return replace(hqs_opts, noise_estimate=fit_poisson_gaussian(views).model)
+            fit = fit_poisson_gaussian(views)
         except ValueError:
-            return hqs_opts
+            return precise(hqs_opts)
+        opts = replace(hqs_opts, noise_estimate=fit.model)
+        return opts if fit.holds() else precise(opts)
     fit = quiet_fit(views)
     if fit is not None and fit.holds():
         if hqs_opts.noise_estimate == "auto":
             return replace(hqs_opts, noise_estimate=fit.model)
         return hqs_opts
-    return replace(hqs_opts, noise_estimate="differences",
-                   cg_tol=min(hqs_opts.cg_tol, NOISELESS_CG_TOL))
+    return precise(replace(hqs_opts, noise_estimate="differences"))
