@@ -6,6 +6,7 @@ import pytest
 import torch
 
 import metasensor as ms
+from metasensor.phasespace import normal as normal_module
 from metasensor.phasespace.normal import FoldedNormal
 from metasensor.phasespace.operator import PhaseSpaceOperator, make_geometry
 from metasensor.solvers.tikhonov import difference_weights, tikhonov
@@ -183,11 +184,16 @@ def test_the_half_of_the_view_frequencies_gives_the_whole(d, grid):
                  / x.norm()) < 1e-4
 
 
-@pytest.mark.parametrize("scan, side, pad", [(5, 20, False), (5, 9, True), (3, 7, True)])
-def test_half_matrix_equals_the_fold_of_full_spectra(scan, side, pad):
+@pytest.mark.parametrize("scan, side, pad, slab", [(5, 20, False, None), (5, 9, True, None),
+                                                   (3, 7, True, None), (5, 20, False, 1),
+                                                   (3, 7, True, 1)])
+def test_half_matrix_equals_the_fold_of_full_spectra(scan, side, pad, slab, monkeypatch):
     # G(p, q) = Σ_v h_vᴴ h_v / d² with h_v the view's full-spectrum OTF at the d² aliases of
-    # (p, q): the build reads the aliases out of the half spectra (the others as conjugates);
-    # reference: full FFTs of the zero-padded PSFs, folded (float32 sums: < 1e-5 relative).
+    # (p, q): the build reads the aliases out of the half spectra (the others as conjugates),
+    # a slab of frequency rows at a time (slab 1 byte: one row at a time); reference: full
+    # FFTs of the zero-padded PSFs, folded (float32 sums: < 1e-5 relative).
+    if slab is not None:
+        monkeypatch.setattr(normal_module, "SLAB_BYTES", slab)
     op, nm = _normal(scan, side, pad)
     ny, nx = op.geometry.domain
     r = op.radius

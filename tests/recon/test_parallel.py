@@ -128,3 +128,27 @@ def test_two_local_workers_never_set_up_two_blocks_at_once(capture):
     two = reconstruct(views, CFG, num_workers=2, **kw)
     assert most[0] == 1
     np.testing.assert_array_equal(two.image, reconstruct(views, CFG, **kw).image)
+
+
+def test_local_workers_are_one_per_thread_as_far_as_memory_holds_them(monkeypatch):
+    # One block per torch thread on the CPU, but no more than half the free memory holds at
+    # BLOCK_BYTES_PER_WINDOW_BYTE times a window each; at least one; one on CUDA regardless.
+    import torch
+
+    from metasensor.io import memory
+    from metasensor.recon import parallel
+
+    before = torch.get_num_threads()
+    torch.set_num_threads(4)
+    try:
+        per_block = parallel.BLOCK_BYTES_PER_WINDOW_BYTE * 100
+        monkeypatch.setattr(memory, "memory_room", lambda: 2 * per_block * 10)
+        assert parallel.local_workers(64, "cpu") == 4  # no window: threads only
+        assert parallel.local_workers(64, "cpu", window_bytes=100) == 4
+        monkeypatch.setattr(memory, "memory_room", lambda: 2 * per_block * 3)
+        assert parallel.local_workers(64, "cpu", window_bytes=100) == 3
+        assert parallel.local_workers(2, "cpu", window_bytes=100) == 2  # blocks
+        monkeypatch.setattr(memory, "memory_room", lambda: per_block)
+        assert parallel.local_workers(64, "cpu", window_bytes=100) == 1
+    finally:
+        torch.set_num_threads(before)

@@ -28,6 +28,9 @@ from metasensor.phasespace.operator import PhaseSpaceOperator
 
 __all__ = ["FoldedNormal"]
 
+# bytes of OTF values gathered at once while G is built (its transient memory)
+SLAB_BYTES = 16 * 2**20
+
 
 def _partner(g, q: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """Where the folded columns ``q`` of a real image's spectrum have their conjugates: the
@@ -83,8 +86,9 @@ class FoldedNormal:
     aliases permuted (a real PSF's spectrum is Hermitian), and so are the right-hand sides and
     solutions of real images, so products, factorisations and solves run on that half.
 
-    Memory: about My·Mx·d⁴·4 bytes (2,100² px domain, d = 3: 145 MB). Calls never change the
-    object.
+    Memory: about My·Mx·d⁴·4 bytes (2,100² px domain, d = 3: 145 MB), and while it is built a
+    few times :data:`SLAB_BYTES` more (the OTF values of a slab of frequency rows, every view at
+    once). Calls never change the object.
     """
 
     def __init__(self, op: PhaseSpaceOperator) -> None:
@@ -102,11 +106,21 @@ class FoldedNormal:
         # (a real PSF's spectrum is Hermitian: H(ky, kx) = conj H(−ky, Nx − kx) for
         # kx >= Nx//2 + 1), not from new FFTs nor full spectra
         index, conj = _alias_index(g, self.device)
-        mat = torch.zeros((my * mh, d * d, d * d), dtype=torch.complex64, device=self.device)
-        for i in range(0, op.n_views, op.chunk):
-            h = op.otf[i:i + op.chunk].reshape(-1, ny * nh).index_select(1, index)
-            h = torch.where(conj, h.conj(), h).T.reshape(my * mh, d * d, -1)  # (P, d², views)
-            mat += torch.matmul(h.conj(), h.transpose(-1, -2))
+        otf = op.otf.reshape(op.n_views, ny * nh)
+        mat = torch.empty((my * mh, d * d, d * d), dtype=torch.complex64, device=self.device)
+        # a few frequency rows at a time, every view at once: the gathered values stay near
+        # SLAB_BYTES whatever the number of views
+        per_row = mh * d * d
+        rows = max(1, SLAB_BYTES // (op.n_views * per_row * 8))
+        for p0 in range(0, my, rows):
+            part = slice(p0 * per_row, min(p0 + rows, my) * per_row)
+            h = otf.index_select(1, index[part])
+            h = torch.where(conj[part], h.conj(), h).T.reshape(-1, d * d, op.n_views)
+            out = mat[p0 * mh:min(p0 + rows, my) * mh]
+            out.zero_()
+            for i in range(0, op.n_views, op.chunk):  # the views' sum in the operator's chunks
+                c = h[..., i:i + op.chunk]
+                out += torch.matmul(c.conj(), c.transpose(-1, -2))
         self.half = (mat / (d * d)).reshape(my, mh, d * d, d * d)
         self.scale = float(self.half.diagonal(dim1=-2, dim2=-1).real.max())
 

@@ -17,17 +17,32 @@ from typing import Any
 __all__ = ["local_workers", "run_tasks"]
 
 
-def local_workers(n_tasks: int, device=None) -> int:
+# a block in flight holds about this many times its window's bytes (its spectra, folded AᵀA,
+# factorisation and work arrays, measured on the whole-sensor stream's blocks), with a margin
+BLOCK_BYTES_PER_WINDOW_BYTE = 16
+
+
+def local_workers(n_tasks: int, device=None, window_bytes: int | None = None) -> int:
     """Blocks to run at once in this process for ``n_tasks`` blocks on ``device``: one per
     torch thread on the CPU (each block then runs on one thread, :func:`run_tasks`), one on
-    CUDA (one device). Why one thread per block on the CPU: docs/decisions.md."""
+    CUDA (one device). Why one thread per block on the CPU: docs/decisions.md.
+
+    ``window_bytes``: one block's view window (bytes, float32) where known; then no more
+    blocks than half of :func:`metasensor.io.memory.memory_room` holds at
+    :data:`BLOCK_BYTES_PER_WINDOW_BYTE` times a window each (at least one)."""
     import torch
 
     from metasensor.backend import resolve_device
 
     if resolve_device(device).type != "cpu":
         return 1
-    return max(1, min(torch.get_num_threads(), int(n_tasks)))
+    workers = max(1, min(torch.get_num_threads(), int(n_tasks)))
+    if window_bytes:
+        from metasensor.io.memory import memory_room
+
+        fit = memory_room() // 2 // (BLOCK_BYTES_PER_WINDOW_BYTE * int(window_bytes))
+        workers = max(1, min(workers, int(fit)))
+    return workers
 
 
 def _client_for(scheduler):
