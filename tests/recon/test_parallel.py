@@ -132,7 +132,7 @@ def test_two_local_workers_never_set_up_two_blocks_at_once(capture):
 
 def test_local_workers_are_one_per_thread_as_far_as_memory_holds_them(monkeypatch):
     # One block per torch thread on the CPU, but no more than half the free memory holds at
-    # BLOCK_BYTES_PER_WINDOW_BYTE times a window each; at least one; one on CUDA regardless.
+    # BLOCK_BYTES_PER_WINDOW_BYTE times a window each, and at least one.
     import torch
 
     from metasensor.io import memory
