@@ -1,6 +1,7 @@
 """The set-up gate of local multi-block runs: held through a block's set-up, lifted while DAO
 estimates the wavefront of a small block (so one block's DAO does not idle the other workers),
-kept through a large block's DAO (whose memory grows with its window)."""
+kept through a large block's DAO (whose memory grows with its window) unless the free memory
+holds two of them."""
 
 import threading
 from types import SimpleNamespace
@@ -45,16 +46,23 @@ def test_the_gate_is_lifted_during_dao_and_held_again_for_the_bank(monkeypatch, 
     assert history == [0.3] and fit == 0.05 and merged[3] == np.float32(0.3)
 
 
-def test_a_large_block_keeps_the_gate_through_dao(monkeypatch, bank_task):
+@pytest.mark.parametrize("room_gb, lifted", [(0.5, False), (64.0, True)])
+def test_a_large_block_keeps_the_gate_through_dao_unless_memory_holds_two(
+        monkeypatch, bank_task, room_gb, lifted):
+    # A window above DAO_UNGATED_SAMPLES: its DAO keeps the gate where the free memory does not
+    # hold two such DAOs, and runs outside it where it does.
+    from metasensor.io import memory
+
     gate = threading.Semaphore(1)
     gate.acquire()
     seen = {}
     monkeypatch.setattr(estimate, "run_dao", _recording_dao(gate, seen))
+    monkeypatch.setattr(memory, "memory_room", lambda: int(room_gb * 1e9))
     side = int(np.sqrt(block.DAO_UNGATED_SAMPLES)) + 1
     window = np.ones((15, 15, side, side), np.float32)
     block._bank(bank_task(gate, lambda cfg, z, dev: np.zeros((15, 15, 3, 3), np.float32)),
                 window)
-    assert seen == {"during_dao": False}
+    assert seen == {"during_dao": lifted}
     assert not _free(gate)
 
 

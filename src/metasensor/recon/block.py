@@ -26,9 +26,14 @@ from metasensor.recon.probe import probe_window
 
 __all__ = ["BlockTask", "BlockResult", "reconstruct_block", "default_psfs", "probe_window"]
 
-# view samples (per view) of the largest block window whose DAO runs outside the set-up gate;
-# why this size: docs/decisions.md
+# view samples (per view) of the largest block window whose DAO always runs outside the set-up
+# gate; why this size: docs/decisions.md
 DAO_UNGATED_SAMPLES = 96 * 96
+# DAO's memory on a window of n view samples (per view): about DAO_BASE_BYTES + n times
+# DAO_BYTES_PER_SAMPLE (measured: docs/decisions.md); a larger window's DAO runs outside the
+# gate too where the free memory holds twice that
+DAO_BASE_BYTES = 350 * 10**6
+DAO_BYTES_PER_SAMPLE = 25 * 10**3
 
 
 @dataclass
@@ -223,8 +228,7 @@ def _bank(task: BlockTask, window: np.ndarray
     res = _probe(task, window, dao, init)
     if res is None:  # not negligible (or no probe): the full estimate, on a sub-window
         sub = probe_window(window, task.dao_samples)
-        small = sub.shape[-2] * sub.shape[-1] <= DAO_UNGATED_SAMPLES
-        with _gate_lifted(task.setup_gate if small else None):
+        with _gate_lifted(task.setup_gate if _dao_ungated(sub) else None):
             res = estimate.run_dao(sub, task.cfg, dao, init=init, device=task.device,
                                    view_mask=_view_mask(task))
     z_est = np.asarray(res.zernike, dtype=np.float32).ravel()
@@ -249,6 +253,18 @@ def _bank(task: BlockTask, window: np.ndarray
         tqdm.write(f"block {tuple(int(i) for i in task.block.index)}: PSF bank of the "
                    f"estimate ready ({np.shape(bank)[-1]} px), solving", file=sys.stderr)
     return bank, merged, history, merged, fit
+
+
+def _dao_ungated(sub: np.ndarray) -> bool:
+    """Whether DAO on the sub-window ``sub`` runs outside the set-up gate: a small window, or
+    one whose DAO (:data:`DAO_BASE_BYTES`, :data:`DAO_BYTES_PER_SAMPLE`) the free memory
+    (:func:`metasensor.io.memory.memory_room`) holds twice over, another block's beside it."""
+    n = sub.shape[-2] * sub.shape[-1]
+    if n <= DAO_UNGATED_SAMPLES:
+        return True
+    from metasensor.io.memory import memory_room
+
+    return memory_room() >= 2 * (DAO_BASE_BYTES + DAO_BYTES_PER_SAMPLE * n)
 
 
 def _operator(task: BlockTask, psf: np.ndarray, data_win: np.ndarray):
