@@ -72,8 +72,9 @@ class BlockTask:
         first progress call (HQS: its set-up done), so that no two blocks build their spectra
         at once (their peaks add up);
         lifted while DAO estimates the wavefront on a sub-window of at most
-        ``DAO_UNGATED_SAMPLES`` view samples, so that one block's DAO does not idle the others
-        (a larger DAO window holds it: DAO's memory grows with its window).
+        ``DAO_UNGATED_SAMPLES`` view samples, so that one block's DAO does not idle the others,
+        and on a larger one where the free memory holds two such DAOs (elsewhere a larger DAO
+        window holds it: DAO's memory grows with its window).
     """
 
     block: Block
