@@ -119,6 +119,7 @@ def test_simulate_run_options(kw, err, match):
 
 @pytest.mark.parametrize("kw, match", [({"iterations": 2.5}, "iterations"),
                                        ({"num_workers": 0}, "num_workers"),
+                                       ({"num_workers": "two"}, "num_workers"),
                                        ({"subsets": 1000}, "subsets")])
 def test_reconstruct_counts(kw, match):
     with pytest.raises(ValueError, match=match):

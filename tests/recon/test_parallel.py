@@ -152,3 +152,27 @@ def test_local_workers_are_one_per_thread_as_far_as_memory_holds_them(monkeypatc
         assert parallel.local_workers(64, "cpu", window_bytes=100) == 1
     finally:
         torch.set_num_threads(before)
+
+
+def test_auto_workers_are_counted_from_the_largest_window_on_local_runs_only(monkeypatch):
+    # num_workers="auto": local_workers(blocks, device, largest window's float32 bytes); "sync"
+    # and a cluster keep their own (None); a given count is left as it is.
+    from metasensor.recon import api, parallel
+    from metasensor.recon.blocks import split_blocks
+    from metasensor.recon.options import ReconOptions
+
+    seen = []
+    monkeypatch.setattr(parallel, "local_workers",
+                        lambda n, device=None, window_bytes=None: seen.append(
+                            (n, window_bytes)) or 3)
+    blocks = split_blocks((60, 90), (2, 3), 3, overlap=6, margin=5)
+    area = max((b.window[1] - b.window[0]) * (b.window[3] - b.window[2]) for b in blocks)
+    auto = ReconOptions(num_workers="auto")
+    assert api._resolve_workers(auto, blocks, (5, 5, 20, 30), 3).num_workers == 3
+    assert seen == [(6, 25 * 4 * area // 9)]
+    for scheduler in ("sync", "tcp://127.0.0.1:8786"):
+        opts = ReconOptions(num_workers="auto", scheduler=scheduler)
+        assert api._resolve_workers(opts, blocks, (5, 5, 20, 30), 3).num_workers is None
+    given = ReconOptions(num_workers=2)
+    assert api._resolve_workers(given, blocks, (5, 5, 20, 30), 3) is given
+    assert len(seen) == 1

@@ -287,25 +287,24 @@ def test_quality_fast_is_a_richardson_lucy_preview_without_an_estimate(files, tm
 
 
 def test_reconstruct_runs_a_block_per_thread_unless_told(files, tmp_path, monkeypatch):
-    # Without --workers the command runs one block per CPU thread as memory allows
-    # (local_workers given the largest block window's bytes); --workers overrides it, and a
-    # cluster keeps its own workers.
-    from metasensor.recon import commands, parallel
-    from metasensor.recon.commands import ReconstructArgs
+    # Without --workers the command asks for num_workers="auto": local_workers for its blocks
+    # and the largest block window's bytes (float32); --workers overrides it.
+    from metasensor.recon import parallel
 
     seen = []
-    monkeypatch.setattr(parallel, "local_workers",
-                        lambda n, device=None, window_bytes=None: seen.append(
-                            (n, window_bytes)) or 2)
+
+    def counting(n, device=None, window_bytes=None):
+        seen.append((n, window_bytes))
+        return 2
+
+    monkeypatch.setattr(parallel, "local_workers", counting)
+    base = ["reconstruct", str(files / "views.tif"), "--psf", str(files / "psf.h5"),
+            "--quality", "fast", "--blocks", "2x1", "--overlap", "6"]
+    res = CliRunner().invoke(app, [*base, "--out", str(tmp_path / "auto")])
+    assert res.exit_code == 0, res.output
     views = tifffile.imread(files / "views.tif")
-    cfg = SystemConfig(nnum=5, scan=5)
-    stack = views.reshape(5, 5, *views.shape[-2:])
-    args = ReconstructArgs(views=files / "views.tif", out=tmp_path, blocks="2x1", overlap=6)
-    assert commands._workers(args, cfg, stack) == 2
-    n, window = seen[0]
-    assert n == 2 and 0 < window < stack.nbytes  # one block's window, float32
-    told = ReconstructArgs(views=files / "views.tif", out=tmp_path, blocks="2x1", workers=1)
-    assert commands._workers(told, cfg, stack) == 1
-    cluster = ReconstructArgs(views=files / "views.tif", out=tmp_path, blocks="2x1",
-                              scheduler="tcp://127.0.0.1:8786")
-    assert commands._workers(cluster, cfg, stack) is None and len(seen) == 1
+    assert len(seen) == 1 and seen[0][0] == 2
+    assert 0 < seen[0][1] < views.size * 4  # one block's window, float32
+    res = CliRunner().invoke(app, [*base, "--workers", "1", "--out", str(tmp_path / "one")])
+    assert res.exit_code == 0, res.output
+    assert len(seen) == 1

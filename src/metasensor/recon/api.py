@@ -226,6 +226,22 @@ def _solver_options(opts: ReconOptions, solver: str, n_views: int, step: int, no
     return RLOptions(iterations=iterations, subsets=subsets, noise_model=shifted), subsets
 
 
+def _resolve_workers(opts: ReconOptions, blocks, view_shape, d: int) -> ReconOptions:
+    """``num_workers="auto"`` as a count: :func:`metasensor.recon.parallel.local_workers` for
+    the blocks and their largest float32 window (local runs; a cluster's workers are its
+    own)."""
+    if opts.num_workers != "auto":
+        return opts
+    if not (opts.scheduler is None or opts.scheduler == "threads"):
+        return ReconOptions.resolve(opts, {"num_workers": None})
+    from metasensor.recon.parallel import local_workers
+
+    area = max((b.window[1] - b.window[0]) * (b.window[3] - b.window[2]) for b in blocks)
+    window = view_shape[0] * view_shape[1] * 4 * area // (d * d)
+    return ReconOptions.resolve(opts, {"num_workers": local_workers(len(blocks), opts.device,
+                                                                    window)})
+
+
 def _tasks(views, cfg: SystemConfig, method: str, grid, zern, opts: ReconOptions, plan: dict):
     """One keyword-built :class:`BlockTask` per block."""
     import threading
@@ -303,6 +319,7 @@ def reconstruct(views, cfg: SystemConfig, method: str = "isa", zernike=None, fie
     margin = opts.margin if opts.margin is not None else (
         psf.shape[-1] // 2 if psf is not None else cfg.nnum)
     block_list = split_blocks(shape, grid, d, overlap=opts.overlap, margin=margin)
+    opts = _resolve_workers(opts, block_list, views.shape, d)
     zern = block_zernikes(block_list, shape, grid, zernike, field_zernike)
     from metasensor.phasespace.views import subset_major, view_order
 

@@ -186,29 +186,8 @@ def _recon_options(args: ReconstructArgs, inputs, target):
                         noise_model=_noise_model(args, inputs), solver_options=args.hqs_options,
                         view_radius=args.view_radius, device=args.device, psf=bank,
                         scheduler=args.scheduler,
-                        num_workers=_workers(args, inputs.config, inputs.stack), out=target,
-                        progress=True)
-
-
-def _workers(args: ReconstructArgs, cfg, stack) -> int | None:
-    """``--workers``, else one block per CPU thread as memory allows (local runs; a cluster's
-    workers are its own)."""
-    if args.workers is not None or args.scheduler not in (None, "threads"):
-        return args.workers
-    from metasensor.cli_options import parse_pair
-    from metasensor.recon.blocks import split_blocks
-    from metasensor.recon.parallel import local_workers
-
-    d = cfg.scan_step_px
-    try:
-        grid = parse_pair(args.blocks, "--blocks")
-        blocks = split_blocks((stack.shape[2] * d, stack.shape[3] * d), grid, d,
-                              overlap=args.overlap, margin=cfg.nnum)
-    except ValueError:
-        return None  # reconstruct names what is wrong
-    area = max((b.window[1] - b.window[0]) * (b.window[3] - b.window[2]) for b in blocks)
-    window = stack.shape[0] * stack.shape[1] * 4 * area // (d * d)  # float32 view samples
-    return local_workers(len(blocks), args.device, window)
+                        num_workers="auto" if args.workers is None else args.workers,
+                        out=target, progress=True)
 
 
 def _zarr_target(args: ReconstructArgs, cfg, stack):

@@ -47,9 +47,10 @@ def capture_noise(hqs_opts, views):
     ``"differences"`` where the views do not follow the model (refused, or ``NoiseFit.holds``
     false: no measurable noise). Under every ``noise_estimate``, views that carry no measurable
     noise get their x-steps solved to ``NOISELESS_CG_TOL`` (no noise hides a loose solve there;
-    a tighter ``cg_tol`` given is kept). ``"poisson-gaussian"`` stays as it is where its fit is
-    refused (each solve then tries its own, or warns). Nothing is measured where the noise is
-    given or a ``noise_model`` weighs the samples (its own σ is used then)."""
+    a tighter ``cg_tol`` given is kept). ``"poisson-gaussian"`` keeps its name (no model)
+    where its fit is refused (each solve then tries its own, or warns). Nothing is measured
+    where the noise is given or a ``noise_model`` weighs the samples (its own σ is used
+    then)."""
     from dataclasses import replace
 
     from metasensor.solvers.hqs_options import NOISELESS_CG_TOL

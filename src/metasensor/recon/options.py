@@ -111,8 +111,10 @@ class ReconOptions:
     psf_fn : callable or None
         ``psf_fn(cfg, zernike (J,), device) -> bank``, replacing ``optics.psf.view_psfs``.
     scheduler : None, "threads", "sync", an address "tcp://host:port", or a dask Client/cluster
-    num_workers : int or None
-        Local blocks run at once (default 1).
+    num_workers : int, "auto" or None
+        Local blocks run at once (default 1); ``"auto"``: one per CPU thread, as many as half
+        the free memory holds at the largest block window
+        (:func:`metasensor.recon.parallel.local_workers`), one on CUDA.
     out : array or None
         A writable ``(H, W)`` float32 array (e.g. zarr) to stitch into; None: NumPy.
     progress : bool
@@ -141,14 +143,15 @@ class ReconOptions:
     psf: Any = None
     psf_fn: Any = None
     scheduler: Any = None
-    num_workers: int | None = None
+    num_workers: int | str | None = None
     out: Any = None
     progress: bool = False
 
     def __post_init__(self) -> None:
-        for name, low in (("iterations", 0), ("subsets", 1), ("num_workers", 1),
-                          ("margin", 0)):
+        for name, low in (("iterations", 0), ("subsets", 1), ("margin", 0)):
             _int_or_none(name, getattr(self, name), low)
+        if self.num_workers != "auto":
+            _int_or_none("num_workers", self.num_workers, 1)
         _int_or_none("overlap", self.overlap, 0)
         for name in ("dao_probe_samples", "dao_samples"):
             s = getattr(self, name)
