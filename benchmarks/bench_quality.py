@@ -32,6 +32,10 @@ Studies (the ``study`` column):
 - ``photos-aberrated`` / ``photos-focus``: the six photographs under 1 and 3 λ through wave DAO
   and 0.25 λ off focus (``benchmarks/quality_photos.py``; ``--photos``, written to
   ``results/quality_photos.json`` case by case and merged into the table when present).
+- ``prior-tune`` / ``prior-focus`` / ``prior-aberrated``: BM3D as the plug-and-play prior
+  (an optional extra, free for non-commercial use only) against the default prior, and the 2D
+  sensor restored with BM3D (``benchmarks/quality_prior.py``; ``--prior``, written to
+  ``results/quality_prior.json``).
 - ``--limit``: the linear-MMSE (Wiener) limit of the meta-imaging sensor and the 2D sensor on the
   six photographs from the operators' spectra (``benchmarks/quality_limit.py``,
   ``results/quality_limit.json``).
@@ -292,6 +296,12 @@ if __name__ == "__main__":
         which = [a for a in studies if a in sys.argv] or list(studies)
         for row in quality_photos.run(tuple(which)):
             print(row)
+    elif "--prior" in sys.argv:  # BM3D as the prior, side by side (benchmarks/quality_prior.py)
+        sys.path.insert(0, str(HERE))
+        import quality_prior
+
+        studies = ("tune", "focus", "aberrated")
+        quality_prior.run(tuple(a for a in studies if a in sys.argv) or studies)
     elif "--limit" in sys.argv:  # the linear-MMSE limit (benchmarks/quality_limit.py)
         sys.path.insert(0, str(HERE))
         import quality_limit

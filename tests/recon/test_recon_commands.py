@@ -308,3 +308,45 @@ def test_reconstruct_runs_a_block_per_thread_unless_told(files, tmp_path, monkey
     res = CliRunner().invoke(app, [*base, "--workers", "1", "--out", str(tmp_path / "one")])
     assert res.exit_code == 0, res.output
     assert len(seen) == 1
+
+
+def test_prior_option_runs_the_given_prior_and_refuses_what_it_cannot_run(files, tmp_path,
+                                                                           monkeypatch):
+    # --prior bm3d: HQS with the plug-and-play prior of metasensor.priors.external (here a
+    # stand-in denoiser, so that the test needs no optional package); without the package, an
+    # unknown prior, or with Richardson-Lucy: a ValueError (the command's exit 2), no work.
+    from metasensor.priors import external
+    from metasensor.recon.commands import ReconstructArgs
+    from metasensor.solvers.hqs_options import HQSOptions
+
+    calls = []
+
+    def smooth(img, sigma):
+        calls.append(sigma)
+        return img
+
+    args = ReconstructArgs(views=files / "views.tif", out=tmp_path)
+    assert args.prior == "hyper-laplacian" and args.hqs_options is None
+    monkeypatch.setattr(external, "bm3d_options", lambda **k: HQSOptions(
+        prior=external.FunctionPrior(smooth), lam_scale=2.0))  # the package "present"
+    for bad, says in ((["--prior", "tv"], "--prior must be one of"),
+                      (["--prior", "bm3d", "--quality", "fast"], "not with Richardson-Lucy")):
+        res = CliRunner().invoke(app, ["reconstruct", str(files / "views.tif"), *bad,
+                                       "--out", str(tmp_path / "x")])
+        assert res.exit_code != 0 and says in str(res.exception), res.output
+    out = tmp_path / "bm3d"
+    res = CliRunner().invoke(app, ["reconstruct", str(files / "views.tif"), "--psf",
+                                   str(files / "psf.h5"), "--prior", "bm3d", "--workers", "1",
+                                   "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    summary = json.loads((out / "summary.json").read_text())
+    assert calls and summary["provenance"]["settings"]["prior"] == "bm3d"
+
+    def missing(**k):
+        raise ImportError(external.BM3D_INSTALL)
+
+    monkeypatch.setattr(external, "bm3d_options", missing)
+    res = CliRunner().invoke(app, ["reconstruct", str(files / "views.tif"), "--prior", "bm3d",
+                                   "--out", str(tmp_path / "x")])
+    assert res.exit_code != 0 and "pip install 'metasensor[bm3d]'" in str(res.exception)
+    assert not (tmp_path / "x").exists()

@@ -22,6 +22,7 @@ from metasensor.recon.inputs import read_psf_file
 __all__ = ["register", "read_psf_file", "ReconstructArgs", "run_reconstruct"]
 
 NOISE_CHOICES = ("auto", "global", "fit", "stored")  # --noise
+PRIOR_CHOICES = ("hyper-laplacian", "bm3d")  # --prior
 
 _Path = Path | None
 
@@ -67,6 +68,11 @@ class ReconstructArgs:
         "--scan-exponent", min=0.0, help="HQS: e of the data weight's scan factor (d/3)^e, d "
         "the scan step in pixels (no effect at d = 3, the 5 x 5 scan of 15-px lenslets); "
         "default: 2 with the differences, 0.5 with a Poisson-Gaussian noise")] = None
+    prior: Annotated[str, typer.Option(
+        "--prior", help="HQS's image prior: hyper-laplacian (sparse gradients, the default) | "
+        "bm3d (BM3D plug-and-play: keeps texture, about 40x slower; needs the optional "
+        "package bm3d, free for non-commercial use only: pip install 'metasensor[bm3d]')")
+    ] = "hyper-laplacian"
     iterations: Annotated[int | None, typer.Option(help="Richardson-Lucy iterations")] = None
     subsets: Annotated[int | None, typer.Option(help="view subsets per iteration")] = None
     view_radius: Annotated[float | None, typer.Option(
@@ -114,10 +120,11 @@ class ReconstructArgs:
         if self.noise_estimate not in NOISE_ESTIMATES:
             raise ValueError(f"--noise-estimate must be one of {', '.join(NOISE_ESTIMATES)}, "
                              f"got {self.noise_estimate!r}")
+        self._check_prior()
         if self.hqs_options is not None and (self.isa_solver == "rl" or self.iterations
                                              is not None or self.subsets is not None):
-            raise ValueError("--noise-estimate/--scan-exponent set HQS's data weight: not with "
-                             "Richardson-Lucy (--solver rl, --quality fast, --iterations, "
+            raise ValueError("--noise-estimate/--scan-exponent/--prior set HQS's options: not "
+                             "with Richardson-Lucy (--solver rl, --quality fast, --iterations, "
                              "--subsets)")
         from metasensor.recon.dao_choice import DAO_CHOICES
 
@@ -135,16 +142,38 @@ class ReconstructArgs:
         """The DAO mode run: ``--dao``, except that a fast preview skips ``auto``'s estimate."""
         return "none" if self.quality == "fast" and self.method == "auto" else self.method
 
+    def _check_prior(self) -> None:
+        """``--prior`` is a known prior, and BM3D's optional package is there."""
+        if self.prior not in PRIOR_CHOICES:
+            raise ValueError(f"--prior must be one of {', '.join(PRIOR_CHOICES)}, got "
+                             f"{self.prior!r}")
+        if self.prior == "bm3d":
+            from metasensor.priors.external import bm3d_options
+
+            try:
+                bm3d_options()
+            except ImportError as err:
+                raise ValueError(f"--prior bm3d: {err}") from None
+
     @property
     def hqs_options(self):
-        """HQSOptions with ``--noise-estimate`` / ``--scan-exponent`` (None: both default)."""
+        """HQSOptions with ``--prior`` / ``--noise-estimate`` / ``--scan-exponent`` (None: all
+        default)."""
+        from dataclasses import replace
+
         from metasensor.solvers.hqs_options import HQSOptions
 
-        if (self.noise_estimate, self.scan_exponent) == ("differences", None):
+        if (self.prior, self.noise_estimate, self.scan_exponent) == (
+                "hyper-laplacian", "differences", None):
             return None
-        return HQSOptions(noise_estimate=self.noise_estimate,
-                          scan_exponent="auto" if self.scan_exponent is None
-                          else self.scan_exponent)
+        base = HQSOptions()
+        if self.prior == "bm3d":
+            from metasensor.priors.external import bm3d_options
+
+            base = bm3d_options()
+        return replace(base, noise_estimate=self.noise_estimate,
+                       scan_exponent="auto" if self.scan_exponent is None
+                       else self.scan_exponent)
 
     @property
     def isa_solver(self) -> str | None:
@@ -160,7 +189,7 @@ class ReconstructArgs:
                           {"method": self.dao, "blocks": self.blocks, "quality": self.quality,
                            "overlap": self.overlap, "solver": self.solver,
                            "noise": self.noise, "noise_estimate": self.noise_estimate,
-                           "scan_exponent": self.scan_exponent,
+                           "scan_exponent": self.scan_exponent, "prior": self.prior,
                            "iterations": self.iterations, "subsets": self.subsets,
                            "view_radius": self.view_radius, "zernike": self.zernike,
                            "config": cfg.to_dict()})
