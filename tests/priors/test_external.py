@@ -92,6 +92,32 @@ def test_bm3d_without_its_package_names_the_extra(monkeypatch):
         bm3d_denoise(np.zeros((8, 8)), 0.1)
 
 
+def test_bm3d_is_called_by_one_thread_at_a_time(monkeypatch):
+    # its binary aborts the process when two blocks' solvers call it at once
+    import sys
+    import threading
+    import time
+    import types
+
+    inside, overlaps = [], []
+
+    def fake_bm3d(img, sigma):
+        overlaps.append(len(inside))
+        inside.append(1)
+        time.sleep(0.02)
+        inside.pop()
+        return img
+
+    monkeypatch.setitem(sys.modules, "bm3d", types.SimpleNamespace(bm3d=fake_bm3d))
+    threads = [threading.Thread(target=bm3d_denoise, args=(np.zeros((8, 8)), 0.1))
+               for _ in range(4)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert overlaps == [0, 0, 0, 0]
+
+
 def test_bm3d_denoises_where_installed():
     pytest.importorskip("bm3d")
     rng = np.random.default_rng(1)

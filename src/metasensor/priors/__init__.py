@@ -5,5 +5,7 @@
 
 from metasensor.priors.deadleaves import dead_leaves
 from metasensor.priors.denoiser import CNNDenoiser, DnCNN, load_denoiser
+from metasensor.priors.external import FunctionPrior, bm3d_options
 
-__all__ = ["dead_leaves", "DnCNN", "CNNDenoiser", "load_denoiser"]
+__all__ = ["dead_leaves", "DnCNN", "CNNDenoiser", "load_denoiser", "FunctionPrior",
+           "bm3d_options"]

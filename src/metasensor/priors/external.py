@@ -16,6 +16,7 @@ gives the HQS settings that run it. Nothing here is hand-written beyond the adap
 from __future__ import annotations
 
 import math
+import threading
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -25,6 +26,10 @@ import torch
 from metasensor.solvers.priors import IDENTITY, Identity
 
 __all__ = ["FunctionPrior", "bm3d_denoise", "bm3d_options", "BM3D_INSTALL"]
+
+#: BM3D's binary (``bm4d``) keeps one thread pool per process and aborts the process when two
+#: threads call it at once (blocks reconstructed in parallel): its calls are serialised.
+_BM3D_LOCK = threading.Lock()
 
 BM3D_INSTALL = ("BM3D needs the optional package bm3d (free for non-commercial use only): "
                 "pip install 'metasensor[bm3d]'")
@@ -87,7 +92,8 @@ class FunctionPrior:
 
 def bm3d_denoise(image: np.ndarray, sigma: float) -> np.ndarray:
     """BM3D of a 2D image with white Gaussian noise of standard deviation ``sigma`` (the image's
-    units), through the optional ``bm3d`` package (module docstring).
+    units), through the optional ``bm3d`` package (module docstring). One call at a time per
+    process: the package's binary is not safe to call from two threads at once.
 
     Raises
     ------
@@ -98,7 +104,8 @@ def bm3d_denoise(image: np.ndarray, sigma: float) -> np.ndarray:
         import bm3d
     except ImportError as err:
         raise ImportError(BM3D_INSTALL) from err
-    return np.asarray(bm3d.bm3d(np.asarray(image, dtype=np.float64), float(sigma)))
+    with _BM3D_LOCK:
+        return np.asarray(bm3d.bm3d(np.asarray(image, dtype=np.float64), float(sigma)))
 
 
 def bm3d_options(lam_scale: float = 2.0, strength: float = 1.0):
