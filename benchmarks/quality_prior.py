@@ -3,9 +3,10 @@
 Run: ``python benchmarks/bench_quality.py --prior [focus] [aberrated] [tune]`` (needs the
 optional ``bm3d`` package, free for non-commercial use only: ``pip install 'metasensor[bm3d]'``;
 without it the study says so and writes nothing). Rows go to ``results/quality_prior.json`` case
-by case (a repeated run skips the cases it holds). Every capture as ``bench_quality``'s: the
-simulator, 5 x 5 scan, 30 dB per frame, seed 0, 256-px fields (240 px of truth); figures against
-``cap.truth``: SSIM, PSNR, resolved frequency (global, worst of 3 x 3 regions).
+by case (a repeated run skips the cases it holds), the figure to ``results/quality_prior.png``.
+Every capture as ``bench_quality``'s: the simulator, 5 x 5 scan, 30 dB per frame, seed 0, 256-px
+fields (240 px of truth); figures against ``cap.truth``: SSIM, PSNR, resolved frequency (global,
+worst of 3 x 3 regions).
 
 Studies (the ``study`` column):
 
@@ -30,6 +31,10 @@ from pathlib import Path
 import numpy as np
 
 HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))  # _paths: where figures go
+
+from _paths import output_path  # noqa: E402
+
 PRIOR_JSON = HERE / "results" / "quality_prior.json"
 PHOTOS = ("camera", "astronaut", "coffee", "chelsea", "rocket", "grass")
 TUNE_SCENES = (10001, 10002)
@@ -157,6 +162,26 @@ def _save(rows: list[dict]) -> None:
                                              default=float))
 
 
+def plot(rows: list[dict], path: Path) -> None:
+    """SSIM and resolved frequency per photograph at the operating point: the default prior,
+    BM3D, the 2D sensor and the 2D sensor denoised by BM3D."""
+    from metasensor.io.figures import new_figure, save_figure
+
+    kinds = ("ISA (default prior)", "ISA (BM3D)", "2D sensor", "2D+BM3D")
+    fig, axes = new_figure(nrows=1, ncols=2, size=(12, 4))
+    for ax, metric in zip(axes[0], ("ssim", "resolved"), strict=True):
+        for k, kind in enumerate(kinds):
+            sel = [next((r for r in rows if r["study"] == "prior-focus" and r["scene"] == n
+                         and r["image"] == kind), None) for n in PHOTOS]
+            xs = [i + 0.15 * (k - 1.5) for i, r in enumerate(sel) if r]
+            ax.plot(xs, [r[metric] for r in sel if r], "osx+"[k], label=kind)
+        ax.set_xticks(range(len(PHOTOS)), PHOTOS, rotation=30, fontsize=8)
+        ax.set_ylabel("SSIM" if metric == "ssim" else "resolved [cycles/px]")
+        ax.set_title("aberration-free, 0.25 λ off focus (2D sensor in focus), 30 dB", fontsize=9)
+        ax.legend(fontsize=7)
+    save_figure(fig, path, dpi=110)
+
+
 def run(studies=("tune", "focus", "aberrated")) -> list[dict]:
     """Every case of ``studies`` not yet in the JSON, most telling first; rows saved per case."""
     try:
@@ -187,4 +212,5 @@ def run(studies=("tune", "focus", "aberrated")) -> list[dict]:
         _save(rows)
         for r in new:
             print(json.dumps({k: v for k, v in r.items()}, default=float), flush=True)
+    plot(rows, output_path("quality_prior.png"))
     return rows
