@@ -124,11 +124,11 @@ def focus_case(name: str) -> list[dict]:
 
 
 def aberrated_case(name: str, rms: float) -> list[dict]:
+    import bench_ed_fig4 as fig4
     import metasensor as ms
     from metasensor.priors.external import bm3d_options
 
     bq = _bq()
-    fig4 = _fig4()
     z = bq.falling_zernike(rms)
     with fig4.coarse_widefield():
         cap = ms.simulate(bq._scene(name, SIZE), ms.SystemConfig(), zernike=z, snr_db=30.0,
@@ -139,15 +139,6 @@ def aberrated_case(name: str, rms: float) -> list[dict]:
                                  ("ISA (wave DAO, BM3D)", bm3d_options())], method="wave")
     rows.append({**key, "image": "2D sensor", **bq.scores(cap.sensor2d, cap.truth)})
     return rows
-
-
-def _fig4():
-    import importlib.util
-
-    spec = importlib.util.spec_from_file_location("bench_ed_fig4", HERE / "bench_ed_fig4.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
 
 
 def _load() -> list[dict]:

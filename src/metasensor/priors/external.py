@@ -15,7 +15,6 @@ gives the HQS settings that run it. Nothing here is hand-written beyond the adap
 
 from __future__ import annotations
 
-import math
 import threading
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -23,6 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from metasensor.priors.pnp import check_noise_levels, noise_level
 from metasensor.solvers.priors import IDENTITY, Identity
 
 __all__ = ["FunctionPrior", "bm3d_denoise", "bm3d_options", "BM3D_INSTALL"]
@@ -63,18 +63,11 @@ class FunctionPrior:
         if not callable(self.denoise):
             raise TypeError(f"denoise must be callable (image, sigma) -> image, got "
                             f"{type(self.denoise).__name__}")
-        for name in ("strength", "sigma_max"):
-            v = getattr(self, name)
-            if not (isinstance(v, int | float) and math.isfinite(v) and v > 0):
-                raise ValueError(f"{name} must be a positive number, got {v!r}")
-        if not (isinstance(self.sigma_min, int | float) and 0 <= self.sigma_min <= self.sigma_max):
-            raise ValueError(f"sigma_min must lie in [0, sigma_max], got {self.sigma_min!r}")
+        check_noise_levels(self.strength, self.sigma_min, self.sigma_max)
 
     def sigma(self, weight: float) -> float:
         """The noise level the denoiser is asked for at the prox weight ``weight`` (> 0)."""
-        if not (math.isfinite(weight) and weight > 0):
-            raise ValueError(f"weight must be a positive number, got {weight!r}")
-        return min(max(self.strength * math.sqrt(weight), self.sigma_min), self.sigma_max)
+        return noise_level(weight, self.strength, self.sigma_min, self.sigma_max)
 
     def prox(self, z: torch.Tensor, weight: float) -> torch.Tensor:
         """Denoise each image of ``z`` (..., H, W) at the noise level of ``weight``."""

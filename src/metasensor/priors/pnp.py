@@ -20,7 +20,25 @@ from metasensor.priors.denoiser import CNNDenoiser
 from metasensor.priors.training import SIGMA_MAX
 from metasensor.solvers.priors import IDENTITY, Identity
 
-__all__ = ["DenoiserPrior", "pnp_options"]
+__all__ = ["DenoiserPrior", "pnp_options", "check_noise_levels", "noise_level"]
+
+
+def check_noise_levels(strength: float, sigma_min: float, sigma_max: float) -> None:
+    """Refuse a plug-and-play prior's settings: ``strength`` and ``sigma_max`` positive numbers,
+    ``0 <= sigma_min <= sigma_max`` (ValueError naming the setting)."""
+    for name, v in (("strength", strength), ("sigma_max", sigma_max)):
+        if not (isinstance(v, int | float) and math.isfinite(v) and v > 0):
+            raise ValueError(f"{name} must be a positive number, got {v!r}")
+    if not (isinstance(sigma_min, int | float) and 0 <= sigma_min <= sigma_max):
+        raise ValueError(f"sigma_min must lie in [0, sigma_max], got {sigma_min!r}")
+
+
+def noise_level(weight: float, strength: float, sigma_min: float, sigma_max: float) -> float:
+    """The denoiser's noise level for the prox weight ``weight`` (> 0): ``strength ·
+    sqrt(weight)`` clamped to ``[sigma_min, sigma_max]`` (the image's units)."""
+    if not (math.isfinite(weight) and weight > 0):
+        raise ValueError(f"weight must be a positive number, got {weight!r}")
+    return min(max(strength * math.sqrt(weight), sigma_min), sigma_max)
 
 
 @dataclass(frozen=True)
@@ -45,18 +63,11 @@ class DenoiserPrior:
     transform: Identity = IDENTITY
 
     def __post_init__(self) -> None:
-        for name in ("strength", "sigma_max"):
-            v = getattr(self, name)
-            if not (isinstance(v, int | float) and math.isfinite(v) and v > 0):
-                raise ValueError(f"{name} must be a positive number, got {v!r}")
-        if not (isinstance(self.sigma_min, int | float) and 0 <= self.sigma_min <= self.sigma_max):
-            raise ValueError(f"sigma_min must lie in [0, sigma_max], got {self.sigma_min!r}")
+        check_noise_levels(self.strength, self.sigma_min, self.sigma_max)
 
     def prox(self, z: torch.Tensor, weight: float) -> torch.Tensor:
         """Denoise ``z`` (..., H, W) at the noise level of ``weight`` (class docstring)."""
-        if not (math.isfinite(weight) and weight > 0):
-            raise ValueError(f"weight must be a positive number, got {weight!r}")
-        sigma = min(max(self.strength * math.sqrt(weight), self.sigma_min), self.sigma_max)
+        sigma = noise_level(weight, self.strength, self.sigma_min, self.sigma_max)
         flat = z.reshape(-1, *z.shape[-2:])
         out = torch.stack([self.denoiser.denoise(img, sigma) for img in flat])
         return out.reshape(z.shape)
