@@ -88,6 +88,18 @@ def bm3d_denoise(image: np.ndarray, sigma: float) -> np.ndarray:
     units), through the optional ``bm3d`` package (module docstring). One call at a time per
     process: the package's binary is not safe to call from two threads at once.
 
+    Parameters
+    ----------
+    image : numpy.ndarray
+        2D image (any float dtype; read as float64, not modified).
+    sigma : float
+        Standard deviation of its noise, in the image's units.
+
+    Returns
+    -------
+    numpy.ndarray
+        The denoised image, float64, the image's shape.
+
     Raises
     ------
     ImportError
@@ -107,6 +119,18 @@ def bm3d_options(lam_scale: float = 2.0, strength: float = 1.0):
     (BM3D at sigma 0.2 of the mean-0.5 image) to 4096 (sigma 0.016), doubling. The data weight
     was chosen on dead-leaves captures, not on the photographs it is measured on
     (docs/decisions.md). Pass the result as ``reconstruct(..., solver_options=bm3d_options())``.
+
+    Parameters
+    ----------
+    lam_scale : float
+        HQS's data weight scale (:class:`~metasensor.solvers.hqs_options.HQSOptions`).
+    strength : float
+        :class:`FunctionPrior`'s scale from the prox weight to BM3D's noise level.
+
+    Returns
+    -------
+    HQSOptions
+        The solver's options, the prior a :class:`FunctionPrior` of :func:`bm3d_denoise`.
 
     Raises
     ------

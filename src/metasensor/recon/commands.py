@@ -70,8 +70,9 @@ class ReconstructArgs:
         "default: 2 with the differences, 0.5 with a Poisson-Gaussian noise")] = None
     prior: Annotated[str, typer.Option(
         "--prior", help="HQS's image prior: hyper-laplacian (sparse gradients, the default) | "
-        "bm3d (BM3D plug-and-play: keeps texture, about 40x slower; needs the optional "
-        "package bm3d, free for non-commercial use only: pip install 'metasensor[bm3d]')")
+        "bm3d (BM3D plug-and-play: keeps texture, tens of times slower, may copy periodic patterns "
+        "where the model is poor; needs the optional package bm3d, free for non-commercial "
+        "use only: pip install 'metasensor[bm3d]')")
     ] = "hyper-laplacian"
     iterations: Annotated[int | None, typer.Option(help="Richardson-Lucy iterations")] = None
     subsets: Annotated[int | None, typer.Option(help="view subsets per iteration")] = None
