@@ -33,6 +33,7 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))  # _paths: where figures go
 
+import bench_quality as bq  # noqa: E402
 from _paths import output_path  # noqa: E402
 
 PRIOR_JSON = HERE / "results" / "quality_prior.json"
@@ -41,13 +42,6 @@ TUNE_SCENES = (10001, 10002)
 TUNE_LAMS = (1.5, 2.0, 3.0)
 SIZE = 256
 OFFSET = 0.25
-
-
-def _bq():
-    sys.path.insert(0, str(HERE))
-    import bench_quality
-
-    return bench_quality
 
 
 def _capture(scene: np.ndarray, offset: float, zernike=None):
@@ -67,7 +61,7 @@ def _meta_rows(cap, key: dict, settings, method: str = "isa") -> list[dict]:
         rec = ms.reconstruct(cap.views, cap.config, method=method,
                              zernike=cap.zernike if method == "isa" else None,
                              solver_options=opts)
-        rows.append({**key, "image": label, **_bq().scores(rec.image, cap.truth),
+        rows.append({**key, "image": label, **bq.scores(rec.image, cap.truth),
                      "seconds": time.perf_counter() - t0})
     return rows
 
@@ -112,11 +106,10 @@ def tune_case(seed: int) -> list[dict]:
 def focus_case(name: str) -> list[dict]:
     from metasensor.priors.external import bm3d_options
 
-    cap = _capture(_bq()._scene(name, SIZE), OFFSET)
+    cap = _capture(bq._scene(name, SIZE), OFFSET)
     key = {"study": "prior-focus", "scene": name, "focus_offset_waves": OFFSET,
            "aberration_rms_waves": 0.0}
     rows = _meta_rows(cap, key, [("ISA (default prior)", None), ("ISA (BM3D)", bm3d_options())])
-    bq = _bq()
     rows.append({**key, "image": "2D sensor", **bq.scores(cap.sensor2d, cap.truth)})
     img, f = restore_2d_bm3d(cap)
     rows.append({**key, "image": "2D+BM3D", "sigma_factor": f, **bq.scores(img, cap.truth)})
@@ -128,7 +121,6 @@ def aberrated_case(name: str, rms: float) -> list[dict]:
     import metasensor as ms
     from metasensor.priors.external import bm3d_options
 
-    bq = _bq()
     z = bq.falling_zernike(rms)
     with fig4.coarse_widefield():
         cap = ms.simulate(bq._scene(name, SIZE), ms.SystemConfig(), zernike=z, snr_db=30.0,
@@ -175,11 +167,12 @@ def plot(rows: list[dict], path: Path) -> None:
 
 def run(studies=("tune", "focus", "aberrated")) -> list[dict]:
     """Every case of ``studies`` not yet in the JSON, most telling first; rows saved per case."""
+    from metasensor.priors.external import require_bm3d
+
     try:
-        import bm3d  # noqa: F401
-    except ImportError:
-        print("the BM3D study needs the optional bm3d package: pip install 'metasensor[bm3d]' "
-              "(free for non-commercial use only); nothing measured")
+        require_bm3d()
+    except ImportError as err:
+        print(f"{err}; nothing measured")
         return _load()
     rows = _load()
     done = {(r["study"], r["scene"], r["aberration_rms_waves"]) for r in rows}
@@ -202,6 +195,6 @@ def run(studies=("tune", "focus", "aberrated")) -> list[dict]:
         rows += new
         _save(rows)
         for r in new:
-            print(json.dumps({k: v for k, v in r.items()}, default=float), flush=True)
+            print(json.dumps(r, default=float), flush=True)
     plot(rows, output_path("quality_prior.png"))
     return rows

@@ -327,8 +327,9 @@ def test_prior_option_runs_the_given_prior_and_refuses_what_it_cannot_run(files,
 
     args = ReconstructArgs(views=files / "views.tif", out=tmp_path)
     assert args.prior == "hyper-laplacian" and args.hqs_options is None
+    monkeypatch.setattr(external, "require_bm3d", lambda: None)  # the package "present"
     monkeypatch.setattr(external, "bm3d_options", lambda **k: HQSOptions(
-        prior=external.FunctionPrior(smooth), lam_scale=2.0))  # the package "present"
+        prior=external.FunctionPrior(smooth), lam_scale=2.0))
     for bad, says in ((["--prior", "tv"], "--prior must be one of"),
                       (["--prior", "bm3d", "--quality", "fast"], "not with Richardson-Lucy")):
         res = CliRunner().invoke(app, ["reconstruct", str(files / "views.tif"), *bad,
@@ -342,10 +343,10 @@ def test_prior_option_runs_the_given_prior_and_refuses_what_it_cannot_run(files,
     summary = json.loads((out / "summary.json").read_text())
     assert calls and summary["provenance"]["settings"]["prior"] == "bm3d"
 
-    def missing(**k):
+    def missing():
         raise ImportError(external.BM3D_INSTALL)
 
-    monkeypatch.setattr(external, "bm3d_options", missing)
+    monkeypatch.setattr(external, "require_bm3d", missing)
     res = CliRunner().invoke(app, ["reconstruct", str(files / "views.tif"), "--prior", "bm3d",
                                    "--out", str(tmp_path / "x")])
     assert res.exit_code != 0 and "pip install 'metasensor[bm3d]'" in str(res.exception)

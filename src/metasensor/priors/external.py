@@ -25,7 +25,7 @@ import torch
 from metasensor.priors.pnp import check_noise_levels, noise_level
 from metasensor.solvers.priors import IDENTITY, Identity
 
-__all__ = ["FunctionPrior", "bm3d_denoise", "bm3d_options", "BM3D_INSTALL"]
+__all__ = ["FunctionPrior", "bm3d_denoise", "bm3d_options", "require_bm3d", "BM3D_INSTALL"]
 
 #: BM3D's binary (``bm4d``) keeps one thread pool per process and aborts the process when two
 #: threads call it at once (blocks reconstructed in parallel): its calls are serialised.
@@ -45,8 +45,8 @@ class FunctionPrior:
     denoise : callable
         ``denoise(image, sigma) -> image``: a 2D float64 NumPy image in the solver's units (the
         phase-space HQS normalises to mean 0.5) and the standard deviation of its white Gaussian
-        noise, same units; returns an array of the image's shape. It must not modify its input
-        and must be deterministic for the solver to be.
+        noise, same units; returns an array of the image's shape. It is handed a copy of the
+        solver's image, and must be deterministic for the solver to be.
     strength : float
         Scale from ``sqrt(weight)`` to the noise level asked for (> 0); larger smooths more.
     sigma_min, sigma_max : float
@@ -83,6 +83,21 @@ class FunctionPrior:
         return torch.stack(out).reshape(z.shape).to(z.device, z.dtype)
 
 
+def require_bm3d():
+    """The optional ``bm3d`` module.
+
+    Raises
+    ------
+    ImportError
+        Where the package is not installed, with :data:`BM3D_INSTALL` (the extra to install).
+    """
+    try:
+        import bm3d
+    except ImportError as err:
+        raise ImportError(BM3D_INSTALL) from err
+    return bm3d
+
+
 def bm3d_denoise(image: np.ndarray, sigma: float) -> np.ndarray:
     """BM3D of a 2D image with white Gaussian noise of standard deviation ``sigma`` (the image's
     units), through the optional ``bm3d`` package (module docstring). One call at a time per
@@ -105,10 +120,7 @@ def bm3d_denoise(image: np.ndarray, sigma: float) -> np.ndarray:
     ImportError
         Where the package is not installed, naming the extra that installs it.
     """
-    try:
-        import bm3d
-    except ImportError as err:
-        raise ImportError(BM3D_INSTALL) from err
+    bm3d = require_bm3d()
     with _BM3D_LOCK:
         return np.asarray(bm3d.bm3d(np.asarray(image, dtype=np.float64), float(sigma)))
 
@@ -140,10 +152,7 @@ def bm3d_options(lam_scale: float = 2.0, strength: float = 1.0):
     from metasensor.solvers.hqs_options import HQSOptions
     from metasensor.solvers.splitting import Continuation
 
-    try:
-        import bm3d  # noqa: F401
-    except ImportError as err:
-        raise ImportError(BM3D_INSTALL) from err
+    require_bm3d()
     return HQSOptions(prior=FunctionPrior(bm3d_denoise, strength=strength), lam_scale=lam_scale,
                       continuation=Continuation(beta0=25.0, beta_max=4096.0, beta_rate=2.0),
                       noise_estimate="differences")

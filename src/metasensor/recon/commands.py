@@ -149,10 +149,10 @@ class ReconstructArgs:
             raise ValueError(f"--prior must be one of {', '.join(PRIOR_CHOICES)}, got "
                              f"{self.prior!r}")
         if self.prior == "bm3d":
-            from metasensor.priors.external import bm3d_options
+            from metasensor.priors.external import require_bm3d
 
             try:
-                bm3d_options()
+                require_bm3d()
             except ImportError as err:
                 raise ValueError(f"--prior bm3d: {err}") from None
 
